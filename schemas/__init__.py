@@ -1,0 +1,37 @@
+"""onebox's messages: msgspec structs, msgpack on the wire, field names as in the ROS messages."""
+
+from schemas.base import Header, Message
+from schemas.codec import TYPES, Codec, codec, json_schema, type_for_key, type_name
+from schemas.geometry import Pose, Quaternion, TFMessage, Transform, TransformStamped, Vector3
+from schemas.sensor import FLOAT32, UINT32, CameraInfo, Image, PointCloud, PointField
+from schemas.sim import Clock, GroundTruth
+from schemas.vision import BoundingBox3D, Detection3D, Detection3DArray, ObjectHypothesis
+
+__all__ = [
+    "FLOAT32",
+    "TYPES",
+    "UINT32",
+    "BoundingBox3D",
+    "CameraInfo",
+    "Clock",
+    "Codec",
+    "Detection3D",
+    "Detection3DArray",
+    "GroundTruth",
+    "Header",
+    "Image",
+    "Message",
+    "ObjectHypothesis",
+    "PointCloud",
+    "PointField",
+    "Pose",
+    "Quaternion",
+    "TFMessage",
+    "Transform",
+    "TransformStamped",
+    "Vector3",
+    "codec",
+    "json_schema",
+    "type_for_key",
+    "type_name",
+]

@@ -1,0 +1,83 @@
+"""msgpack on the wire: one Encoder and one typed Decoder per message type, made once.
+
+``TYPES`` says which type travels on which key (without the namespace prefix); the recorder,
+``onebox info`` and ``onebox check`` use it to name and describe what they see.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+from typing import Any, Generic, TypeVar
+
+import msgspec
+
+from schemas.base import Message
+from schemas.geometry import TFMessage, TransformStamped
+from schemas.sensor import CameraInfo, Image, PointCloud
+from schemas.sim import Clock, GroundTruth
+from schemas.vision import Detection3DArray
+
+M = TypeVar("M", bound=Message)
+
+_ENCODER = msgspec.msgpack.Encoder()
+
+
+class Codec(Generic[M]):
+    """Encodes and decodes one message type; get one with :func:`codec`."""
+
+    def __init__(self, message_type: type[M]) -> None:
+        self.type = message_type
+        self.name = type_name(message_type)
+        self._decoder = msgspec.msgpack.Decoder(message_type)
+
+    def encode(self, message: M) -> bytes:
+        return _ENCODER.encode(message)
+
+    def decode(self, payload: bytes | bytearray | memoryview) -> M:
+        """Raises msgspec.DecodeError (a ValueError) when the bytes are not this type."""
+        return self._decoder.decode(payload)
+
+
+@functools.cache
+def codec(message_type: type[M]) -> Codec[M]:
+    """The one codec of ``message_type``."""
+    return Codec(message_type)
+
+
+def type_name(message_type: type[Message]) -> str:
+    """A stable, readable name: ``onebox.sensor.Image``."""
+    module = message_type.__module__.removeprefix("schemas.")
+    return f"onebox.{module}.{message_type.__qualname__}"
+
+
+@functools.cache
+def json_schema(message_type: type[Message]) -> bytes:
+    """The JSON schema of a type, as written into MCAP recordings so that they describe themselves."""
+    schema: dict[str, Any] = msgspec.json.schema(message_type)
+    schema["title"] = type_name(message_type)
+    return json.dumps(schema, sort_keys=True).encode()
+
+
+TYPES: dict[str, type[Message]] = {
+    "camera/image_raw": Image,
+    "camera/depth/image_raw": Image,
+    "camera/camera_info": CameraInfo,
+    "camera/pose": TransformStamped,
+    "camera/points": PointCloud,
+    "basic_camera/image_raw": Image,
+    "basic_camera/depth/image_raw": Image,
+    "basic_camera/camera_info": CameraInfo,
+    "basic_camera/pose": TransformStamped,
+    "tf_static": TFMessage,
+    "clock": Clock,
+    "detections": Detection3DArray,
+    "sim/ground_truth": GroundTruth,
+}
+"""The pipeline's keys, without namespace, and the type each carries."""
+
+
+def type_for_key(key: str, namespace: str = "") -> type[Message] | None:
+    """The type a key carries, or None for a key that is not the pipeline's."""
+    prefix = f"{namespace.strip('/')}/" if namespace else ""
+    return TYPES.get(key.removeprefix(prefix))

@@ -1,0 +1,1 @@
+"""onebox's processes and tools, one module each; ``onebox --help`` lists them."""

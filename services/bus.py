@@ -1,0 +1,294 @@
+"""The one way every onebox process talks Zenoh.
+
+- :func:`add_arguments` gives every parser ``--connect``, ``--listen``, ``--config`` and
+  ``--namespace`` (as zenoh-python's examples/common does), and :func:`open_bus` turns them into
+  an open session on loopback with multicast scouting off.
+- :class:`Bus` makes typed publishers and subscribers on namespaced keys. A payload that does
+  not decode is logged with its key (once per key per interval) and dropped; it never reaches
+  the callback and never kills the process.
+- :class:`NewestQueue` is the bounded queue between a Zenoh callback and a worker: when the
+  worker is slow the oldest item is dropped, counted, and the newest kept.
+- ``latched=True`` publishers keep their last sample in a Zenoh publication cache and
+  ``history=True`` subscribers ask for it, so a late joiner still receives ``tf_static``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import contextlib
+import logging
+import signal
+import threading
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import FrameType
+from typing import Any, Generic, TypeVar
+
+import msgspec
+import zenoh
+import zenoh.ext
+
+from schemas import Message, codec
+from services import settings
+from services.errors import BusError
+
+log = logging.getLogger("bus")
+
+M = TypeVar("M", bound=Message)
+T = TypeVar("T")
+
+PEER_CONFIG = settings.CONFIG_DIR / "peer.json5"
+ROUTER_CONFIG = settings.CONFIG_DIR / "router.json5"
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The Zenoh flags every onebox command takes."""
+    group = parser.add_argument_group("zenoh")
+    group.add_argument(
+        "--connect",
+        "-e",
+        action="append",
+        metavar="ENDPOINT",
+        help=f"endpoint to connect to, repeatable (default {DEFAULT_ENDPOINT}, the local router)",
+    )
+    group.add_argument(
+        "--listen",
+        "-l",
+        action="append",
+        metavar="ENDPOINT",
+        help="endpoint to listen on, repeatable (default tcp/127.0.0.1:0, any free port)",
+    )
+    group.add_argument(
+        "--config",
+        type=Path,
+        metavar="FILE",
+        help=f"a Zenoh JSON5 configuration to start from (default {PEER_CONFIG.name} in config/)",
+    )
+    settings.add(
+        group, "namespace", "", "prefix for every key: robot1 gives robot1/camera/image_raw"
+    )
+
+
+def zenoh_config(args: argparse.Namespace, default_file: Path = PEER_CONFIG) -> zenoh.Config:
+    """The configuration file, then the flags on top of it."""
+    path: Path = args.config or default_file
+    try:
+        config = zenoh.Config.from_file(str(path))
+    except Exception as e:  # zenoh raises its own ZError for a missing or malformed file
+        raise BusError(f"cannot load Zenoh configuration {path}: {e}") from e
+    if args.connect:
+        config.insert_json5("connect/endpoints", msgspec.json.encode(args.connect).decode())
+    if args.listen:
+        config.insert_json5("listen/endpoints", msgspec.json.encode(args.listen).decode())
+    return config
+
+
+def install_signal_handlers() -> None:
+    """Make SIGTERM (what honcho and kill send) unwind like Ctrl-C, so every ``with`` closes."""
+
+    def _raise(signum: int, frame: FrameType | None) -> None:
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+
+    signal.signal(signal.SIGTERM, _raise)
+
+
+class ReportLimiter:
+    """Logs a problem once per key per interval, with how many were held back in between."""
+
+    def __init__(self, logger: logging.Logger, interval_s: float = 2.0) -> None:
+        self._logger = logger
+        self._interval_s = interval_s
+        self._last: dict[tuple[str, str], float] = {}
+        self._held: collections.Counter[tuple[str, str]] = collections.Counter()
+        self._lock = threading.Lock()
+
+    def warn(self, key: str, kind: str, message: str) -> None:
+        """Log ``message`` about ``key`` unless one of the same ``kind`` was logged lately."""
+        now = time.monotonic()
+        slot = (key, kind)
+        with self._lock:
+            last = self._last.get(slot)
+            if last is not None and now - last < self._interval_s:
+                self._held[slot] += 1
+                return
+            held = self._held.pop(slot, 0)
+            self._last[slot] = now
+        more = f" ({held} more like it since the last report)" if held else ""
+        self._logger.warning("%s: %s%s", key, message, more)
+
+
+class NewestQueue(Generic[T]):
+    """A bounded queue that, when full, drops the oldest item and counts it."""
+
+    def __init__(self, maxlen: int = 2) -> None:
+        self._items: collections.deque[T] = collections.deque(maxlen=maxlen)
+        self._ready = threading.Condition()
+        self.dropped = 0
+
+    def put(self, item: T) -> None:
+        with self._ready:
+            if len(self._items) == self._items.maxlen:
+                self.dropped += 1
+            self._items.append(item)
+            self._ready.notify()
+
+    def get(self, timeout_s: float | None = None) -> T | None:
+        """The oldest item kept, or None when nothing came within ``timeout_s``."""
+        with self._ready:
+            if not self._ready.wait_for(lambda: bool(self._items), timeout=timeout_s):
+                return None
+            return self._items.popleft()
+
+    def __len__(self) -> int:
+        with self._ready:
+            return len(self._items)
+
+
+class Publisher(Generic[M]):
+    """Publishes messages of one type on one key."""
+
+    def __init__(self, key: str, message_type: type[M], publisher: Any) -> None:
+        self.key = key
+        self._codec = codec(message_type)
+        self._publisher = publisher
+
+    def publish(self, message: M) -> bytes:
+        """Encode and send ``message``; returns the bytes that travelled."""
+        payload = self._codec.encode(message)
+        self._publisher.put(payload)
+        return payload
+
+    def publish_bytes(self, payload: bytes) -> None:
+        """Send bytes already encoded (a replay sends exactly what was recorded)."""
+        self._publisher.put(payload)
+
+
+@dataclass
+class Bus:
+    """An open Zenoh session with the namespace applied to every key it names."""
+
+    session: zenoh.Session
+    namespace: str = ""
+    _closers: list[Callable[[], None]] = field(default_factory=list)
+    _limiter: ReportLimiter = field(default_factory=lambda: ReportLimiter(log))
+
+    def key(self, name: str) -> str:
+        """``camera/image_raw`` under the namespace: ``robot1/camera/image_raw``."""
+        ns = self.namespace.strip("/")
+        return f"{ns}/{name}" if ns else name
+
+    def unkey(self, key: str) -> str:
+        """The key without the namespace prefix."""
+        ns = self.namespace.strip("/")
+        return key.removeprefix(f"{ns}/") if ns else key
+
+    def publisher(
+        self,
+        name: str,
+        message_type: type[M],
+        *,
+        latched: bool = False,
+        congestion_control: zenoh.CongestionControl = zenoh.CongestionControl.DROP,
+    ) -> Publisher[M]:
+        """A publisher on ``name``; ``latched`` keeps the last sample for late joiners."""
+        key = self.key(name)
+        if latched:
+            pub: Any = zenoh.ext.declare_advanced_publisher(
+                self.session,
+                key,
+                cache=zenoh.ext.CacheConfig(max_samples=1),
+                publisher_detection=True,
+                congestion_control=zenoh.CongestionControl.BLOCK,
+            )
+        else:
+            pub = self.session.declare_publisher(key, congestion_control=congestion_control)
+        self._closers.append(pub.undeclare)
+        return Publisher(key, message_type, pub)
+
+    def subscribe_raw(
+        self, expr: str, callback: Callable[[str, bytes], None], *, history: bool = False
+    ) -> None:
+        """Call ``callback(key, payload)`` for every sample on ``expr`` (namespaced).
+
+        ``history`` asks latched publishers for what they published before this subscriber
+        started. An exception in ``callback`` is logged with the key and the sample dropped.
+        """
+        key_expr = self.key(expr)
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            key = str(sample.key_expr)
+            try:
+                callback(key, sample.payload.to_bytes())
+            except Exception as e:  # a bad sample must never kill the subscriber thread
+                self._limiter.warn(key, type(e).__name__, f"dropped: {e}")
+
+        if history:
+            sub: Any = zenoh.ext.declare_advanced_subscriber(
+                self.session,
+                key_expr,
+                on_sample,
+                history=zenoh.ext.HistoryConfig(detect_late_publishers=True, max_samples=1),
+                subscriber_detection=True,
+            )
+        else:
+            sub = self.session.declare_subscriber(key_expr, on_sample)
+        self._closers.append(sub.undeclare)
+
+    def subscribe(
+        self,
+        expr: str,
+        message_type: type[M],
+        callback: Callable[[str, M], None],
+        *,
+        history: bool = False,
+    ) -> None:
+        """Call ``callback(key, message)`` with each sample on ``expr`` decoded as ``message_type``.
+
+        A payload that is not a ``message_type`` is logged with its key and dropped.
+        """
+        decoder = codec(message_type)
+
+        def on_payload(key: str, payload: bytes) -> None:
+            try:
+                message = decoder.decode(payload)
+            except (msgspec.DecodeError, msgspec.ValidationError) as e:
+                self._limiter.warn(key, "decode", f"not a {decoder.name}, dropped: {e}")
+                return
+            callback(key, message)
+
+        self.subscribe_raw(expr, on_payload, history=history)
+
+    def close(self) -> None:
+        """Undeclare everything this bus declared (the session itself closes with its ``with``)."""
+        while self._closers:
+            closer = self._closers.pop()
+            with contextlib.suppress(zenoh.ZError):
+                closer()
+
+
+@contextlib.contextmanager
+def open_bus(args: argparse.Namespace, default_file: Path = PEER_CONFIG) -> Iterator[Bus]:
+    """Open a session from the parsed flags; everything closes when the block ends."""
+    config = zenoh_config(args, default_file)
+    try:
+        session = zenoh.open(config)
+    except zenoh.ZError as e:
+        raise BusError(
+            f"cannot open Zenoh with {args.config or default_file}: {e}. Is something already "
+            "listening on that port? Try --listen tcp/127.0.0.1:0"
+        ) from e
+    with session:
+        bus = Bus(session, getattr(args, "namespace", "") or "")
+        try:
+            yield bus
+        finally:
+            bus.close()
+
+
+def routers(bus: Bus) -> list[str]:
+    """The routers this session is connected to, as Zenoh ids."""
+    return [str(zid) for zid in bus.session.info.routers_zid()]

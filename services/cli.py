@@ -1,0 +1,88 @@
+"""onebox: a depth camera on a stand finds a red box on a table.
+
+Every process and tool is a subcommand; ``onebox COMMAND --help`` explains each.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import os
+import sys
+
+from services.errors import OneboxError
+
+# name: (module, one line). Modules are imported only when their command runs, so that
+# ``onebox --help`` does not load MuJoCo or Rerun.
+COMMANDS: dict[str, tuple[str, str]] = {
+    "router": ("services.router", "the Zenoh router every process on this host connects to"),
+    "sim": ("services.sim", "simulate the table, the box and both cameras; publish what they see"),
+    "locator": ("services.locator", "find the box in each depth picture; publish detections"),
+    "points": ("services.points", "turn depth and colour into camera/points"),
+    "viewer": ("services.viewer", "show everything live in Rerun (the seed's RViz)"),
+    "view": ("services.viewer_file", "show an .mcap recording in Rerun, or write an .rrd"),
+    "record": ("services.record", "record keys into an .mcap file (ros2 bag record)"),
+    "snapshot": ("services.snapshot", "record one capture into an .mcap file and exit"),
+    "replay": ("services.replay", "publish an .mcap recording back onto its keys (ros2 bag play)"),
+    "info": ("services.info", "summarise an .mcap recording (ros2 bag info)"),
+    "pixels": ("services.pixels", "print every pixel of the basic camera (make camera.pixels)"),
+    "check": ("services.check", "list what is being published (make camera.check)"),
+}
+
+
+def _top_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="onebox",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="commands:\n"
+        + "\n".join(f"  {name:<10} {line}" for name, (_, line) in COMMANDS.items()),
+    )
+    parser.add_argument("command", metavar="COMMAND", help="one of the commands below")
+    return parser
+
+
+def command_parser(name: str) -> tuple[argparse.ArgumentParser, object]:
+    """The parser of one command and its module."""
+    module = importlib.import_module(COMMANDS[name][0])
+    parser = argparse.ArgumentParser(
+        prog=f"onebox {name}",
+        description=module.__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    module.add_arguments(parser)
+    return parser, module
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``onebox`` console script."""
+    os.environ.setdefault("MUJOCO_GL", "egl")  # render headless unless told otherwise
+    argv = sys.argv[1:] if argv is None else argv
+    if not argv or argv[0] in {"-h", "--help"}:
+        _top_parser().print_help()
+        return 0 if argv else 2
+    name, rest = argv[0], argv[1:]
+    if name not in COMMANDS:
+        _top_parser().error(f"unknown command {name!r}")
+    logging.basicConfig(
+        level=os.environ.get("ONEBOX_LOG", "INFO").upper(),
+        format="%(levelname)s [%(name)s] %(message)s",
+    )
+    from services.bus import install_signal_handlers
+
+    install_signal_handlers()
+    try:
+        parser, module = command_parser(name)
+        args = parser.parse_args(rest)
+        code: int = module.main(args)  # type: ignore[attr-defined]
+        return code
+    except OneboxError as e:
+        print(f"onebox {name}: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,28 @@
+"""onebox router: the Zenoh router every onebox process on this host connects to.
+
+Reads nothing and writes nothing itself; it routes. Listens on tcp/127.0.0.1:7447 by default
+(config/router.json5), loopback only, with multicast scouting off. Runs until Ctrl-C or SIGTERM.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import threading
+
+from services import bus
+
+log = logging.getLogger("router")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    bus.add_arguments(parser)
+
+
+def main(args: argparse.Namespace) -> int:
+    """Open a router session and hold it until stopped."""
+    with bus.open_bus(args, default_file=bus.ROUTER_CONFIG) as b:
+        endpoints = args.listen or ["tcp/127.0.0.1:7447"]
+        log.info("routing on %s (zid %s)", ", ".join(endpoints), b.session.info.zid())
+        threading.Event().wait()
+    return 0
