@@ -53,7 +53,7 @@ def type_name(message_type: type[Message]) -> str:
 
 @functools.cache
 def json_schema(message_type: type[Message]) -> bytes:
-    """The JSON schema of a type, as written into MCAP recordings so that they describe themselves."""
+    """The JSON schema of a type, written into MCAP recordings so they describe themselves."""
     schema: dict[str, Any] = msgspec.json.schema(message_type)
     schema["title"] = type_name(message_type)
     return json.dumps(schema, sort_keys=True).encode()
