@@ -1,0 +1,577 @@
+"""Reading and writing onebox's MCAP recordings, shared by record, snapshot, replay, info and view.
+
+A recording has one channel a key (the key as it travelled, namespace included), message
+encoding ``msgpack`` and schema encoding ``jsonschema``: the schema is the msgspec JSON schema
+of the key's type and its name the type's name (``onebox.sensor.Image``), so a reader with only
+the ``mcap`` library can decode and check every message. A key with no known type is still
+recorded, on a channel with no schema (schema id 0, as the MCAP spec allows).
+
+Message bytes are written exactly as they travelled. The log time is when a message arrived
+(wall clock, ns since the Unix epoch); the publish time its header stamp (simulated ns), or
+``Clock.clock_ns`` for ``clock``, or the first transform's stamp for a TFMessage, or the log
+time when a message has none of these (the MCAP spec's rule).
+
+Reading is strict by default: a missing, empty, non-MCAP or truncated file raises
+:class:`RecordingError` naming the file. ``recover=True`` reads every complete chunk of a
+truncated file (a recorder killed with SIGKILL), in file order, which for onebox's recorder is
+log-time order.
+"""
+
+from __future__ import annotations
+
+import io
+import logging
+import os
+import struct
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import msgspec
+from mcap.exceptions import McapError
+from mcap.reader import make_reader
+from mcap.records import Channel, Chunk, Footer, Schema, Statistics
+from mcap.records import Message as McapMessage
+from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.writer import CompressionType, Writer
+
+from schemas import TYPES, Message, codec, json_schema, type_for_key, type_name
+from services.errors import RecordingError
+
+log = logging.getLogger("recording")
+
+MAGIC = b"\x89MCAP0\r\n"
+MESSAGE_ENCODING = "msgpack"
+SCHEMA_ENCODING = "jsonschema"
+PROFILE = "onebox"
+COMPRESSIONS: dict[str, CompressionType] = {
+    "none": CompressionType.NONE,
+    "lz4": CompressionType.LZ4,
+    "zstd": CompressionType.ZSTD,
+}
+
+TYPES_BY_NAME: dict[str, type[Message]] = {type_name(t): t for t in TYPES.values()}
+"""Every pipeline type by the schema name a recording stores for it."""
+
+
+@dataclass(frozen=True, slots=True)
+class Recorded:
+    """One recorded message: its key as it travelled, its times and its bytes."""
+
+    key: str
+    log_time_ns: int
+    """When it arrived at the recorder, ns since the Unix epoch."""
+    publish_time_ns: int
+    """Its header stamp, simulated ns (the log time when it has none)."""
+    payload: bytes
+    schema_name: str = ""
+    """The type the file names for this key (``onebox.sensor.Image``), empty when none."""
+
+
+@dataclass
+class KeyInfo:
+    """What one channel of a recording holds."""
+
+    key: str
+    schema_name: str
+    schema_encoding: str
+    message_encoding: str
+    count: int = 0
+
+
+@dataclass
+class RecordingInfo:
+    """The summary of a recording, as ``onebox info`` prints it."""
+
+    path: Path
+    size_bytes: int
+    complete: bool
+    """False for a truncated file read with ``recover=True``."""
+    message_count: int
+    start_ns: int
+    end_ns: int
+    chunk_count: int
+    compression: str
+    library: str
+    keys: list[KeyInfo] = field(default_factory=list)
+
+    @property
+    def duration_s(self) -> float:
+        return (self.end_ns - self.start_ns) / 1e9 if self.message_count else 0.0
+
+
+# --- stamps -------------------------------------------------------------------------------------
+
+
+class _Stamp(msgspec.Struct):
+    stamp_ns: int = 0
+
+
+class _Stamped(msgspec.Struct):
+    """Only the fields that carry a message's time; msgpack skips everything else cheaply."""
+
+    header: _Stamp | None = None
+    clock_ns: int | None = None
+    transforms: list[_Stamped] | None = None
+
+
+_STAMP_DECODER = msgspec.msgpack.Decoder(_Stamped)
+
+
+def stamp_ns(payload: bytes | memoryview) -> int | None:
+    """The simulated time a payload describes, without decoding its pictures; None if none."""
+    try:
+        stamped = _STAMP_DECODER.decode(payload)
+    except (msgspec.DecodeError, msgspec.ValidationError):
+        return None
+    if stamped.header is not None:
+        return stamped.header.stamp_ns
+    if stamped.clock_ns is not None:
+        return stamped.clock_ns
+    if stamped.transforms and stamped.transforms[0].header is not None:
+        return stamped.transforms[0].header.stamp_ns
+    return None
+
+
+def has_header(message_type: type[Message] | None) -> bool:
+    """Whether a type's publish time is a header stamp (simulated time)."""
+    return message_type is not None and "header" in message_type.__struct_fields__
+
+
+# --- writing ------------------------------------------------------------------------------------
+
+
+class _WriteThrough:
+    """A file the MCAP writer writes straight to the OS, without a buffer in this process.
+
+    The writer emits a whole chunk (and its message index) per write, so what it has written
+    is in the kernel's page cache at once and survives SIGKILL; only the chunk being built in
+    memory is lost.
+    """
+
+    def __init__(self, fd: int) -> None:
+        self._fd = fd
+        self._position = 0
+
+    def write(self, data: bytes | bytearray | memoryview) -> int:
+        view = memoryview(data)
+        while view:
+            written = os.write(self._fd, view)
+            view = view[written:]
+        self._position += len(data)
+        return len(data)
+
+    def tell(self) -> int:
+        return self._position
+
+    def flush(self) -> None:
+        """Nothing is buffered here."""
+
+    def close(self) -> None:
+        os.close(self._fd)
+
+
+def open_new(path: Path, *, overwrite: bool) -> int:
+    """Open ``path`` for writing; refuse, naming it, when it exists and ``overwrite`` is off."""
+    flags = os.O_WRONLY | os.O_CREAT | (os.O_TRUNC if overwrite else os.O_EXCL)
+    try:
+        return os.open(path, flags, 0o644)
+    except FileExistsError:
+        raise RecordingError(
+            f"{path} already exists: delete it, choose another name, or pass --overwrite"
+        ) from None
+    except OSError as e:
+        raise RecordingError(f"cannot create {path}: {e.strerror}") from e
+
+
+class RecordingWriter:
+    """Writes messages into a new MCAP file, one channel a key; use it in a ``with`` block.
+
+    ``add`` is not thread-safe: one thread writes (the recorder hands messages to its writer
+    thread through a queue). Chunks close when they reach ``chunk_size_bytes`` or when
+    :meth:`flush` is called, whichever is first.
+    """
+
+    def __init__(
+        self,
+        path: Path,
+        *,
+        namespace: str = "",
+        compression: str = "none",
+        chunk_size_bytes: int = 4 * 1024 * 1024,
+        overwrite: bool = False,
+    ) -> None:
+        if compression not in COMPRESSIONS:
+            raise RecordingError(
+                f"unknown compression {compression!r}: choose one of {', '.join(COMPRESSIONS)}"
+            )
+        self.path = path
+        self.namespace = namespace
+        self._stream = _WriteThrough(open_new(path, overwrite=overwrite))
+        self._writer = Writer(
+            self._stream,  # type: ignore[arg-type]  # a file-like object is all it needs
+            chunk_size=chunk_size_bytes,
+            compression=COMPRESSIONS[compression],
+        )
+        self._writer.start(profile=PROFILE, library="onebox")
+        self._channels: dict[str, int] = {}
+        self._schemas: dict[str, int] = {}
+        self._sequence = 0
+        self._finished = False
+        self.message_count = 0
+        self.byte_count = 0
+
+    def channel(self, key: str) -> int:
+        """The channel of ``key``, registered with its type's schema the first time."""
+        channel_id = self._channels.get(key)
+        if channel_id is not None:
+            return channel_id
+        message_type = type_for_key(key, self.namespace)
+        schema_id = 0
+        if message_type is not None:
+            name = type_name(message_type)
+            schema_id = self._schemas.get(name, 0)
+            if not schema_id:
+                schema_id = self._writer.register_schema(
+                    name=name, encoding=SCHEMA_ENCODING, data=json_schema(message_type)
+                )
+                self._schemas[name] = schema_id
+        channel_id = self._writer.register_channel(
+            topic=key, message_encoding=MESSAGE_ENCODING, schema_id=schema_id
+        )
+        self._channels[key] = channel_id
+        return channel_id
+
+    def add(
+        self, key: str, payload: bytes, log_time_ns: int, publish_time_ns: int | None = None
+    ) -> None:
+        """Write one message; ``publish_time_ns`` defaults to the payload's stamp."""
+        if publish_time_ns is None:
+            stamp = stamp_ns(payload)
+            publish_time_ns = log_time_ns if stamp is None else stamp
+        self._sequence += 1
+        self._writer.add_message(
+            channel_id=self.channel(key),
+            log_time=log_time_ns,
+            data=payload,
+            publish_time=publish_time_ns,
+            sequence=self._sequence & 0xFFFFFFFF,
+        )
+        self.message_count += 1
+        self.byte_count += len(payload)
+
+    def flush(self) -> None:
+        """Close the chunk being built and hand it to the OS, so a SIGKILL cannot lose it."""
+        self._writer.flush()  # type: ignore[no-untyped-call]  # mcap leaves it unannotated
+
+    def finish(self) -> None:
+        """Write the last chunk, the indexes and the summary, and close the file."""
+        if self._finished:
+            return
+        self._finished = True
+        try:
+            self._writer.finish()  # type: ignore[no-untyped-call]
+        finally:
+            self._stream.close()
+
+    def __enter__(self) -> RecordingWriter:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.finish()
+
+
+# --- reading ------------------------------------------------------------------------------------
+
+
+def _check_file(path: Path) -> bool:
+    """Raise for a file that cannot be a recording; return whether it ends complete."""
+    try:
+        size = path.stat().st_size
+    except FileNotFoundError:
+        raise RecordingError(f"{path}: no such file") from None
+    except OSError as e:
+        raise RecordingError(f"{path}: {e.strerror}") from e
+    if path.is_dir():
+        raise RecordingError(f"{path} is a directory, not an MCAP file")
+    if size == 0:
+        raise RecordingError(f"{path} is empty, not an MCAP recording")
+    try:
+        with path.open("rb") as f:
+            head = f.read(len(MAGIC))
+            f.seek(max(0, size - len(MAGIC)))
+            tail = f.read(len(MAGIC))
+    except OSError as e:
+        raise RecordingError(f"{path}: {e.strerror}") from e
+    if head != MAGIC:
+        raise RecordingError(f"{path} is not an MCAP file (it does not start with MCAP's magic)")
+    return size >= 2 * len(MAGIC) + 1 and tail == MAGIC
+
+
+def _truncated(path: Path) -> RecordingError:
+    return RecordingError(
+        f"{path} is truncated (no summary at its end: was the recorder killed, or the copy "
+        "cut short?); pass --recover to read its complete chunks"
+    )
+
+
+def _recovered_records(path: Path, f: io.BufferedReader) -> Iterator[Any]:
+    """Records up to the first one that is cut short; whole chunks only."""
+    reader = StreamReader(f, emit_chunks=True)
+    records = reader.records
+    while True:
+        try:
+            record = next(records)
+        except StopIteration:
+            return
+        except (McapError, struct.error, EOFError, ValueError) as e:
+            log.warning("%s: stopped at a record cut short (%s)", path, type(e).__name__)
+            return
+        if isinstance(record, Chunk):
+            try:
+                yield from breakup_chunk(record, validate_crc=True)
+            except (McapError, ValueError) as e:
+                log.warning("%s: dropped a damaged chunk (%s)", path, e)
+                return
+        else:
+            yield record
+
+
+def _iter_recovered(path: Path, keys: set[str] | None) -> Iterator[Recorded]:
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    with path.open("rb") as f:
+        for record in _recovered_records(path, f):
+            if isinstance(record, Schema):
+                schemas[record.id] = record
+            elif isinstance(record, Channel):
+                channels[record.id] = record
+            elif isinstance(record, McapMessage):
+                channel = channels.get(record.channel_id)
+                if channel is None or (keys is not None and channel.topic not in keys):
+                    continue
+                schema = schemas.get(channel.schema_id)
+                yield Recorded(
+                    key=channel.topic,
+                    log_time_ns=record.log_time,
+                    publish_time_ns=record.publish_time,
+                    payload=record.data,
+                    schema_name=schema.name if schema else "",
+                )
+            elif isinstance(record, Footer):
+                return
+
+
+def iter_messages(
+    path: Path | str, keys: list[str] | None = None, *, recover: bool = False
+) -> Iterator[Recorded]:
+    """Every message of a recording (only ``keys``, if given), in log-time order.
+
+    Raises :class:`RecordingError` naming the file when it is missing, empty, not MCAP or
+    truncated (unless ``recover``) at once, and when it is damaged as soon as that is found.
+    """
+    path = Path(path)
+    complete = _check_file(path)
+    wanted = set(keys) if keys is not None else None
+    if not complete:
+        if not recover:
+            raise _truncated(path)
+        return _iter_recovered(path, wanted)
+    return _iter_complete(path, wanted)
+
+
+def _iter_complete(path: Path, wanted: set[str] | None) -> Iterator[Recorded]:
+    try:
+        with path.open("rb") as f:
+            reader = make_reader(f)
+            for schema, channel, message in reader.iter_messages(
+                topics=sorted(wanted) if wanted is not None else None, log_time_order=True
+            ):
+                yield Recorded(
+                    key=channel.topic,
+                    log_time_ns=message.log_time,
+                    publish_time_ns=message.publish_time,
+                    payload=message.data,
+                    schema_name=schema.name if schema else "",
+                )
+    except (McapError, struct.error, EOFError, ValueError) as e:
+        raise RecordingError(f"{path} is damaged: {type(e).__name__}: {e}") from e
+
+
+def read_capture(
+    path: Path | str, namespace: str = "", *, recover: bool = False
+) -> dict[str, Message]:
+    """The last message on each key, decoded with the schemas' types.
+
+    Keys are as recorded, less ``namespace``. A key whose type the schemas do not know is
+    left out; a message that does not decode as its type raises :class:`RecordingError`.
+    """
+    last: dict[str, Recorded] = {}
+    for recorded in iter_messages(path, recover=recover):
+        last[recorded.key] = recorded
+    prefix = f"{namespace.strip('/')}/" if namespace else ""
+    capture: dict[str, Message] = {}
+    for key, recorded in last.items():
+        message_type = TYPES_BY_NAME.get(recorded.schema_name) or type_for_key(key, namespace)
+        if message_type is None:
+            log.info("%s: %s has no known type; left out", path, key)
+            continue
+        try:
+            capture[key.removeprefix(prefix)] = codec(message_type).decode(recorded.payload)
+        except (msgspec.DecodeError, msgspec.ValidationError) as e:
+            raise RecordingError(
+                f"{path}: the message on {key} is not a {type_name(message_type)}: {e}"
+            ) from e
+    return capture
+
+
+def describe(path: Path | str, *, recover: bool = False) -> RecordingInfo:
+    """What a recording holds, read from its summary (or, for a recovered file, its messages)."""
+    path = Path(path)
+    complete = _check_file(path)
+    size = path.stat().st_size
+    if not complete:
+        if not recover:
+            raise _truncated(path)
+        return _describe_by_reading(path, size)
+    try:
+        with path.open("rb") as f:
+            reader = make_reader(f)
+            header = reader.get_header()
+            summary = reader.get_summary()
+    except (McapError, struct.error, EOFError, ValueError) as e:
+        raise RecordingError(f"{path} is damaged: {type(e).__name__}: {e}") from e
+    if summary is None or summary.statistics is None:
+        # A valid file written without a summary: count by reading it through.
+        return _describe_by_reading(path, size)
+    stats: Statistics = summary.statistics
+    compressions = sorted({c.compression or "none" for c in summary.chunk_indexes})
+    info = RecordingInfo(
+        path=path,
+        size_bytes=size,
+        complete=True,
+        message_count=stats.message_count,
+        start_ns=stats.message_start_time,
+        end_ns=stats.message_end_time,
+        chunk_count=stats.chunk_count,
+        compression=", ".join(compressions) or "none",
+        library=header.library,
+    )
+    for channel in sorted(summary.channels.values(), key=lambda c: c.topic):
+        schema = summary.schemas.get(channel.schema_id)
+        info.keys.append(
+            KeyInfo(
+                key=channel.topic,
+                schema_name=schema.name if schema else "",
+                schema_encoding=schema.encoding if schema else "",
+                message_encoding=channel.message_encoding,
+                count=stats.channel_message_counts.get(channel.id, 0),
+            )
+        )
+    return info
+
+
+def _describe_by_reading(path: Path, size: int) -> RecordingInfo:
+    schemas: dict[int, Schema] = {}
+    keys: dict[int, KeyInfo] = {}
+    info = RecordingInfo(path, size, False, 0, 0, 0, 0, "", "")
+    compressions: set[str] = set()
+    with path.open("rb") as f:
+        reader = StreamReader(f, emit_chunks=True)
+        records = reader.records
+        while True:
+            try:
+                record = next(records)
+            except StopIteration:
+                break
+            except (McapError, struct.error, EOFError, ValueError):
+                break
+            inner: list[Any] = [record]
+            if isinstance(record, Chunk):
+                try:
+                    inner = list(breakup_chunk(record, validate_crc=True))
+                except (McapError, ValueError):
+                    break
+                info.chunk_count += 1
+                compressions.add(record.compression or "none")
+            for r in inner:
+                if isinstance(r, Schema):
+                    schemas[r.id] = r
+                elif isinstance(r, Channel):
+                    schema = schemas.get(r.schema_id)
+                    keys[r.id] = KeyInfo(
+                        r.topic,
+                        schema.name if schema else "",
+                        schema.encoding if schema else "",
+                        r.message_encoding,
+                    )
+                elif isinstance(r, McapMessage) and r.channel_id in keys:
+                    keys[r.channel_id].count += 1
+                    if info.message_count == 0:
+                        info.start_ns = info.end_ns = r.log_time
+                    info.start_ns = min(info.start_ns, r.log_time)
+                    info.end_ns = max(info.end_ns, r.log_time)
+                    info.message_count += 1
+                elif isinstance(r, Footer):
+                    info.complete = True
+    info.compression = ", ".join(sorted(compressions)) or "none"
+    info.keys = sorted(keys.values(), key=lambda k: k.key)
+    return info
+
+
+# --- a queue between a Zenoh callback and a writer thread ---------------------------------------
+
+
+class ByteBudgetQueue:
+    """A FIFO of (key, log_time_ns, payload) that holds at most ``budget_bytes`` of payloads.
+
+    The Zenoh callback puts and never blocks or touches the disk; the writer thread gets. The
+    log time is taken under the queue's lock, so queue order is log-time order and the file is
+    written in log-time order. The budget covers what is queued and what the writer has taken
+    but not yet :meth:`release`d; when the writer falls that far behind, new messages are
+    dropped and counted per key rather than growing memory without bound.
+    """
+
+    def __init__(self, budget_bytes: int) -> None:
+        self._items: list[tuple[str, int, bytes]] = []
+        self._bytes = 0
+        self._budget_bytes = budget_bytes
+        self._ready = threading.Condition()
+        self.dropped: dict[str, int] = {}
+
+    def put(self, key: str, payload: bytes) -> bool:
+        """Queue ``payload`` stamped with the time now; False (and counted) when over budget."""
+        with self._ready:
+            if self._bytes + len(payload) > self._budget_bytes and self._bytes:
+                self.dropped[key] = self.dropped.get(key, 0) + 1
+                return False
+            self._items.append((key, time.time_ns(), payload))
+            self._bytes += len(payload)
+            self._ready.notify()
+            return True
+
+    def get_all(self, timeout_s: float) -> list[tuple[str, int, bytes]]:
+        """Everything queued, oldest first; empty when nothing came within ``timeout_s``."""
+        with self._ready:
+            if not self._ready.wait_for(lambda: bool(self._items), timeout=timeout_s):
+                return []
+            items, self._items = self._items, []
+            return items
+
+    def release(self, nbytes: int) -> None:
+        """The writer has written ``nbytes`` of what it took; make room for that much."""
+        with self._ready:
+            self._bytes -= nbytes
+
+    def __len__(self) -> int:
+        with self._ready:
+            return len(self._items)
