@@ -69,6 +69,7 @@ def main(argv: list[str] | None = None) -> int:
         level=os.environ.get("ONEBOX_LOG", "INFO").upper(),
         format="%(levelname)s [%(name)s] %(message)s",
     )
+    logging.getLogger("OpenGL").setLevel(logging.WARNING)  # PyOpenGL chatters at INFO on import
     from services.bus import install_signal_handlers
 
     install_signal_handlers()

@@ -74,6 +74,8 @@ def add(
     if kind is None:
         kind = parse_bool if isinstance(fallback, bool) else type(fallback)
     value = default(name, fallback, kind)
+    # A yes/no setting also works as a bare flag: --gui is --gui true.
+    extra: dict[str, Any] = {"nargs": "?", "const": True} if kind is parse_bool else {}
     parser.add_argument(
         f"--{name.replace('_', '-')}",
         dest=name,
@@ -81,4 +83,5 @@ def add(
         default=value,
         metavar=name.upper(),
         help=f"{help} (default {value!r}; environment {name.upper()})",
+        **extra,
     )
