@@ -57,7 +57,6 @@ def command_parser(name: str) -> tuple[argparse.ArgumentParser, object]:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``onebox`` console script."""
-    os.environ.setdefault("MUJOCO_GL", "egl")  # render headless unless told otherwise
     argv = sys.argv[1:] if argv is None else argv
     if not argv or argv[0] in {"-h", "--help"}:
         _top_parser().print_help()

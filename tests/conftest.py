@@ -78,9 +78,8 @@ class Processes:
                 self.stop(proc)
 
 
-@pytest.fixture
-def router() -> Iterator[str]:
-    """A private ``onebox router`` on a free loopback port; yields its endpoint."""
+def _run_router() -> Iterator[str]:
+    """Start ``onebox router`` on a free loopback port, yield its endpoint, stop it."""
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     procs = Processes(endpoint)
@@ -96,6 +95,18 @@ def router() -> Iterator[str]:
             time.sleep(0.05)
     yield endpoint
     procs.stop_all()
+
+
+@pytest.fixture
+def router() -> Iterator[str]:
+    """A private ``onebox router`` on a free loopback port; yields its endpoint."""
+    yield from _run_router()
+
+
+@pytest.fixture(scope="module")
+def module_router() -> Iterator[str]:
+    """One private router shared by the tests of a module (for an expensive shared capture)."""
+    yield from _run_router()
 
 
 @pytest.fixture
