@@ -34,7 +34,7 @@ from typing import Any
 import msgspec
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
-from mcap.records import Channel, Chunk, Footer, Schema, Statistics
+from mcap.records import Channel, Chunk, Footer, Header, Schema, Statistics
 from mcap.records import Message as McapMessage
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
@@ -48,6 +48,8 @@ MAGIC = b"\x89MCAP0\r\n"
 MESSAGE_ENCODING = "msgpack"
 SCHEMA_ENCODING = "jsonschema"
 PROFILE = "onebox"
+METADATA_NAME = "onebox"
+"""The metadata record that holds the simulated time a recording spans (header stamps)."""
 COMPRESSIONS: dict[str, CompressionType] = {
     "none": CompressionType.NONE,
     "lz4": CompressionType.LZ4,
@@ -98,6 +100,9 @@ class RecordingInfo:
     compression: str
     library: str
     keys: list[KeyInfo] = field(default_factory=list)
+    sim_start_ns: int | None = None
+    """The first header stamp written, from the file's ``onebox`` metadata; None if unknown."""
+    sim_end_ns: int | None = None
 
     @property
     def duration_s(self) -> float:
@@ -224,6 +229,8 @@ class RecordingWriter:
         self._finished = False
         self.message_count = 0
         self.byte_count = 0
+        self.sim_start_ns: int | None = None
+        self.sim_end_ns: int | None = None
 
     def channel(self, key: str) -> int:
         """The channel of ``key``, registered with its type's schema the first time."""
@@ -253,6 +260,9 @@ class RecordingWriter:
         if publish_time_ns is None:
             stamp = stamp_ns(payload)
             publish_time_ns = log_time_ns if stamp is None else stamp
+            if stamp is not None:
+                self.sim_start_ns = min(stamp, self.sim_start_ns or stamp)
+                self.sim_end_ns = max(stamp, self.sim_end_ns or stamp)
         self._sequence += 1
         self._writer.add_message(
             channel_id=self.channel(key),
@@ -274,6 +284,11 @@ class RecordingWriter:
             return
         self._finished = True
         try:
+            if self.sim_start_ns is not None and self.sim_end_ns is not None:
+                self._writer.add_metadata(
+                    METADATA_NAME,
+                    {"sim_start_ns": str(self.sim_start_ns), "sim_end_ns": str(self.sim_end_ns)},
+                )
             self._writer.finish()  # type: ignore[no-untyped-call]
         finally:
             self._stream.close()
@@ -448,6 +463,7 @@ def describe(path: Path | str, *, recover: bool = False) -> RecordingInfo:
             reader = make_reader(f)
             header = reader.get_header()
             summary = reader.get_summary()
+            metadata = {m.name: m.metadata for m in reader.iter_metadata()}
     except (McapError, struct.error, EOFError, ValueError) as e:
         raise RecordingError(f"{path} is damaged: {type(e).__name__}: {e}") from e
     if summary is None or summary.statistics is None:
@@ -466,6 +482,9 @@ def describe(path: Path | str, *, recover: bool = False) -> RecordingInfo:
         compression=", ".join(compressions) or "none",
         library=header.library,
     )
+    sim = metadata.get(METADATA_NAME, {})
+    if "sim_start_ns" in sim and "sim_end_ns" in sim:
+        info.sim_start_ns, info.sim_end_ns = int(sim["sim_start_ns"]), int(sim["sim_end_ns"])
     for channel in sorted(summary.channels.values(), key=lambda c: c.topic):
         schema = summary.schemas.get(channel.schema_id)
         info.keys.append(
@@ -504,7 +523,9 @@ def _describe_by_reading(path: Path, size: int) -> RecordingInfo:
                 info.chunk_count += 1
                 compressions.add(record.compression or "none")
             for r in inner:
-                if isinstance(r, Schema):
+                if isinstance(r, Header):
+                    info.library = r.library
+                elif isinstance(r, Schema):
                     schemas[r.id] = r
                 elif isinstance(r, Channel):
                     schema = schemas.get(r.schema_id)

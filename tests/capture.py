@@ -1,0 +1,19 @@
+"""Read a recorded capture into typed messages, as the seed's tests read their rosbag (3.1)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from schemas import Message
+from services.recording import read_capture
+
+CAPTURE = Path(__file__).resolve().parent / "data" / "one_box.mcap"
+
+
+def load_capture(path: Path | str = CAPTURE, namespace: str = "") -> dict[str, Message]:
+    """The last message on each key of ``path``, keyed without ``namespace``.
+
+    For the committed capture: ``camera/camera_info``, ``camera/depth/image_raw``,
+    ``camera/image_raw`` (one stamp) and ``tf_static``.
+    """
+    return read_capture(path, namespace)
