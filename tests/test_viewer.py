@@ -1,0 +1,164 @@
+"""onebox viewer and onebox view: what they log to Rerun, read back from the .rrd they write."""
+
+from __future__ import annotations
+
+import subprocess
+import urllib.request
+
+import numpy as np
+import pytest
+import rerun as rr
+
+from schemas import Image, TFMessage, codec, type_for_key
+from services import rerun_log
+from tests.conftest import free_port
+from tests.fake_capture import BOX_CENTRE, BOX_SIZE, capture, tf_static
+from tests.rrd import contents, wait_for_output
+
+
+def publish_until_exit(test_bus, proc: subprocess.Popen[str], camera: str = "camera") -> None:
+    """Publish captures 5 a second, new stamps each, until the viewer has what it wants."""
+    tf = test_bus.publisher("tf_static", TFMessage, latched=True)
+    tf.publish(tf_static())
+    publishers = {}
+    stamp_ns = 0
+    while proc.poll() is None:
+        stamp_ns += 200_000_000
+        for key, message in capture(stamp_ns, camera).items():
+            if key not in publishers:
+                publishers[key] = test_bus.publisher(key, type(message))
+            publishers[key].publish(message)
+        try:
+            proc.wait(timeout=0.2)  # the capture rate; returns early once the viewer is done
+        except subprocess.TimeoutExpired:
+            continue
+        assert stamp_ns < 100 * 200_000_000, "the viewer never completed a capture"
+
+
+def check_scene(held: dict, width: int = 320, height: int = 240) -> None:
+    """The pinhole, both pictures, the points, the frames and the box, as the capture said.
+
+    Each component holds a list of instances; the single ones are taken with [0].
+    """
+    pinhole = held["/world/camera/image"]
+    # Rerun stores the 3 x 3 matrix column by column.
+    k = np.asarray(pinhole["Pinhole:image_from_camera"][0]).reshape(3, 3).T
+    assert k[0, 2] == pytest.approx(width / 2) and k[1, 2] == pytest.approx(height / 2)
+    assert k[0, 0] == pytest.approx(width / 2 / np.tan(np.radians(30)), rel=1e-5)
+    assert pinhole["Pinhole:resolution"][0] == [width, height]
+    rgb = held["/world/camera/image/rgb"]
+    assert rgb["Image:format"][0]["width"] == width
+    assert len(rgb["Image:buffer"][0]) == width * height * 3
+    depth = held["/world/camera/image/depth"]
+    depth_m = np.frombuffer(bytes(depth["DepthImage:buffer"][0]), "<f4")
+    assert depth_m.size == width * height
+    assert depth_m[0] == 0.0, "NaN (no reading) must reach Rerun as 0"
+    assert np.unique(depth_m[1:]).tolist() == pytest.approx([0.34, 0.4])
+    points = np.asarray(held["/world/camera/points"]["Points3D:positions"])
+    assert points.shape == (width * height - 1, 3)
+    assert held["/world/camera"]["Transform3D:translation"][0] == pytest.approx([0, 0, 0.4])
+    assert held["/world/camera_link"]["Transform3D:translation"][0] == pytest.approx([0, 0, 0.4])
+    assert "/world/camera_link/camera_optical_frame" in held
+    box = held["/world/detections"]
+    assert box["Boxes3D:centers"][0] == pytest.approx(BOX_CENTRE)
+    assert np.asarray(box["Boxes3D:half_sizes"][0]) * 2 == pytest.approx(BOX_SIZE)
+    assert box["Boxes3D:labels"][0] == "box 1.00: 0.060 x 0.060 x 0.060 m"
+    assert "/world/table" in held
+
+
+def test_viewer_saves_what_the_bus_carries(processes, test_bus, tmp_path):
+    """Fed captures over Zenoh, --save writes an .rrd with pinhole, pictures, points and box."""
+    out = tmp_path / "live.rrd"
+    proc = processes.start("viewer", "--save", str(out), "--frames", "1", "--duration", "60")
+    publish_until_exit(test_bus, proc)
+    log = processes.stop(proc)
+    assert proc.returncode == 0, log
+    assert "capture at" in log
+    held = contents(out)
+    check_scene(held)
+    assert held["/world/camera/image/rgb"]["_times"][0].total_seconds() > 0, "on sim time"
+
+
+def test_viewer_keeps_going_after_bad_messages(processes, test_bus, tmp_path):
+    """Garbage and a picture whose step is wrong are reported by key; the viewer carries on."""
+    out = tmp_path / "bad.rrd"
+    proc = processes.start("viewer", "--save", str(out), "--frames", "1", "--duration", "60")
+    raw = test_bus.session.declare_publisher("camera/image_raw")
+    sheared = test_bus.publisher("camera/depth/image_raw", Image)
+    bad_image = Image(width=320, height=240, encoding="32FC1", step=100, data=b"\0" * 100)
+    for _ in range(3):
+        raw.put(b"\xc1 not msgpack")
+        sheared.publish(bad_image)
+    publish_until_exit(test_bus, proc)
+    log = processes.stop(proc)
+    assert proc.returncode == 0, log
+    check_scene(contents(out))
+
+
+def test_viewer_off_idles_until_stopped(processes):
+    """VIEWER=false logs "viewer off", stays up (honcho would stop everything) and exits 0."""
+    proc = processes.start("viewer", env={"VIEWER": "false"})
+    wait_for_output(proc, "viewer off", timeout_s=20)
+    assert proc.poll() is None
+    processes.stop(proc)
+    assert proc.returncode == 0
+
+
+def test_viewer_serves_the_web_viewer_on_loopback(processes, test_bus):
+    """With no display it serves the web viewer on 127.0.0.1 and prints the address to open."""
+    grpc_port, web_port = free_port(), free_port()
+    proc = processes.start(
+        "viewer",
+        "--grpc-port",
+        str(grpc_port),
+        "--web-port",
+        str(web_port),
+        env={"DISPLAY": "", "WAYLAND_DISPLAY": ""},
+    )
+    printed = wait_for_output(proc, "/proxy", timeout_s=40)
+    address = f"http://127.0.0.1:{web_port}/?url=rerun%2Bhttp://127.0.0.1:{grpc_port}/proxy"
+    assert address in printed
+    with urllib.request.urlopen(f"http://127.0.0.1:{web_port}/", timeout=10) as page:
+        assert page.status == 200 and b"<html" in page.read().lower()
+    processes.stop(proc)
+    assert proc.returncode == 0
+    # The web server child went with it: its port is free again.
+    with pytest.raises(OSError):
+        urllib.request.urlopen(f"http://127.0.0.1:{web_port}/", timeout=2)
+
+
+def test_scene_log_draws_an_empty_detection_array_as_no_box(tmp_path):
+    """An empty Detection3DArray clears the box instead of leaving the last one standing."""
+    out = tmp_path / "empty.rrd"
+    rec = rr.RecordingStream("onebox_test")
+    rec.save(out)
+    msgs = capture(200_000_000)
+    empty = type(msgs["detections"])()
+    with rec:
+        scene = rerun_log.SceneLog(rec)
+        scene.start()
+        assert scene.log("detections", msgs["detections"]) == "detections"
+        assert scene.log("detections", empty) == "detections"
+        assert scene.log("basic_camera/image_raw", msgs["camera/image_raw"]) is None
+    held = contents(out)
+    assert any("Clear" in name for name in held["/world/detections"])
+
+
+def test_every_pipeline_type_round_trips_through_scene_log(tmp_path):
+    """Each message of a capture decodes from its wire bytes and becomes the entity it should."""
+    rec = rr.RecordingStream("onebox_test")
+    rec.save(tmp_path / "kinds.rrd")
+    with rec:
+        scene = rerun_log.SceneLog(rec)
+        kinds = {}
+        for key, message in capture(1).items():
+            wire = codec(type(message)).encode(message)
+            kinds[key] = scene.log(key, codec(type_for_key(key)).decode(wire))
+    assert kinds == {
+        "camera/image_raw": "colour",
+        "camera/depth/image_raw": "depth",
+        "camera/camera_info": "info",
+        "camera/pose": "pose",
+        "camera/points": "points",
+        "detections": "detections",
+    }
