@@ -295,13 +295,16 @@ def locate_box(
         candidates = np.flatnonzero(flat * limit.reshape(-1) > loose_gap_m)
     if len(candidates) == 0:
         return None
-    # The exact seed arithmetic, in float64, on the few candidates only.
+    # The exact seed arithmetic, in float64, on the few candidates only; a zero, negative or
+    # infinite reading is no reading, whatever the comparison said.
     d = flat[candidates].astype(np.float64)
+    real = (d > 0.0) & (d < np.inf)
+    candidates, d = candidates[real], d[real]
     across, down = _rays(width, height, lens)
     rows, cols = np.divmod(candidates, width)
     ray_x, ray_y = across[cols], down[rows]
     z = camera[2] + rotation[2, 0] * (ray_x * d) + rotation[2, 1] * (ray_y * d) + rotation[2, 2] * d
-    keep = (z > table_z + min_height) & (d > 0.0) & np.isfinite(d)
+    keep = z > table_z + min_height
     if not keep.any():
         return None
     d, z, ray_x, ray_y = d[keep], z[keep], ray_x[keep], ray_y[keep]
