@@ -18,6 +18,7 @@ import argparse
 import collections
 import contextlib
 import logging
+import os
 import signal
 import threading
 import time
@@ -43,6 +44,9 @@ T = TypeVar("T")
 PEER_CONFIG = settings.CONFIG_DIR / "peer.json5"
 ROUTER_CONFIG = settings.CONFIG_DIR / "router.json5"
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+ROUTER_ENV = "ONEBOX_ROUTER"
+"""An environment variable naming the local router's endpoint: the router listens there and
+every other process connects there (``ONEBOX_ROUTER=tcp/127.0.0.1:17447 honcho start``)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -53,7 +57,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "-e",
         action="append",
         metavar="ENDPOINT",
-        help=f"endpoint to connect to, repeatable (default {DEFAULT_ENDPOINT}, the local router)",
+        help=f"endpoint to connect to, repeatable (default ${ROUTER_ENV} or {DEFAULT_ENDPOINT}, "
+        "the local router)",
     )
     group.add_argument(
         "--listen",
@@ -80,10 +85,17 @@ def zenoh_config(args: argparse.Namespace, default_file: Path = PEER_CONFIG) -> 
         config = zenoh.Config.from_file(str(path))
     except Exception as e:  # zenoh raises its own ZError for a missing or malformed file
         raise BusError(f"cannot load Zenoh configuration {path}: {e}") from e
-    if args.connect:
-        config.insert_json5("connect/endpoints", msgspec.json.encode(args.connect).decode())
-    if args.listen:
-        config.insert_json5("listen/endpoints", msgspec.json.encode(args.listen).decode())
+    connect, listen = args.connect, args.listen
+    router_endpoint = os.environ.get(ROUTER_ENV)
+    if router_endpoint and args.config is None:
+        if default_file == ROUTER_CONFIG:
+            listen = listen or [router_endpoint]
+        else:
+            connect = connect or [router_endpoint]
+    if connect:
+        config.insert_json5("connect/endpoints", msgspec.json.encode(connect).decode())
+    if listen:
+        config.insert_json5("listen/endpoints", msgspec.json.encode(listen).decode())
     return config
 
 

@@ -79,6 +79,11 @@ class SceneRenderer:
 
     def render(self, data: mujoco.MjData, camera: str) -> Capture:
         """Colour and depth of ``camera`` as the world is in ``data`` (new arrays each call)."""
+        self.draw(data, camera)
+        return self.read(camera)
+
+    def draw(self, data: mujoco.MjData, camera: str) -> None:
+        """Queue the drawing of ``camera``'s view (the rasteriser may finish it in ``read``)."""
         spec = self._cameras[camera]
         self._camera.fixedcamid = self._ids[camera]
         mujoco.mjv_updateScene(
@@ -90,10 +95,15 @@ class SceneRenderer:
             mujoco.mjtCatBit.mjCAT_ALL,
             self._scene,
         )
-        rect = mujoco.MjrRect(0, 0, spec.width, spec.height)
-        mujoco.mjr_render(rect, self._scene, self._context)
+        mujoco.mjr_render(mujoco.MjrRect(0, 0, spec.width, spec.height), self._scene, self._context)
+
+    def read(self, camera: str) -> Capture:
+        """Read back what ``draw`` drew: both buffers in one call, flipped to top row first."""
+        spec = self._cameras[camera]
         rgb_gl, depth_gl = self._buffers[camera]
+        rect = mujoco.MjrRect(0, 0, spec.width, spec.height)
         mujoco.mjr_readPixels(rgb_gl, depth_gl, rect, self._context)
+        # OpenGL's rows run bottom to top.
         return Capture(rgb=rgb_gl[::-1].copy(), depth_m=self._metres(depth_gl[::-1]))
 
     def _metres(self, depth_gl: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:

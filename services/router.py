@@ -1,7 +1,8 @@
 """onebox router: the Zenoh router every onebox process on this host connects to.
 
 Reads nothing and writes nothing itself; it routes. Listens on tcp/127.0.0.1:7447 by default
-(config/router.json5), loopback only, with multicast scouting off. Runs until Ctrl-C or SIGTERM.
+(config/router.json5), or on $ONEBOX_ROUTER, or on --listen; loopback only, with multicast
+scouting off. Runs until Ctrl-C or SIGTERM.
 """
 
 from __future__ import annotations
@@ -22,7 +23,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     """Open a router session and hold it until stopped."""
     with bus.open_bus(args, default_file=bus.ROUTER_CONFIG) as b:
-        endpoints = args.listen or ["tcp/127.0.0.1:7447"]
-        log.info("routing on %s (zid %s)", ", ".join(endpoints), b.session.info.zid())
+        config = bus.zenoh_config(args, bus.ROUTER_CONFIG)
+        log.info(
+            "routing on %s (zid %s)", config.get_json("listen/endpoints"), b.session.info.zid()
+        )
         threading.Event().wait()
     return 0
