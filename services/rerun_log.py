@@ -7,7 +7,8 @@ One :class:`SceneLog` turns each message into Rerun archetypes on one recording,
 - ``world``: right-handed, Z up; the table (its top at ``table_z``, with the 5 cm grid);
 - ``world/camera_link``, ``world/camera_link/camera_optical_frame``: ``tf_static``'s chain, with
   axes, static;
-- ``world/camera``: the camera at its pose (``camera/pose``, world -> camera_optical_frame);
+- ``world/camera``: the camera at its pose (``camera/pose``, world -> camera_optical_frame, or,
+  until a pose arrives, the chain on ``tf_static`` to the pictures' frame);
   ``world/camera/image`` the pinhole (``camera/camera_info``), with ``.../rgb`` the colour
   picture and ``.../depth`` the depth picture under it; ``world/camera/points`` the point cloud
   (camera_optical_frame, so it sits under the camera's pose);
@@ -25,6 +26,7 @@ import numpy as np
 import numpy.typing as npt
 import rerun as rr
 import rerun.blueprint as rrb
+from scipy.spatial.transform import Rotation
 
 from schemas import (
     CameraInfo,
@@ -108,6 +110,29 @@ def grid_lines(half_m: float, z_m: float, spacing_m: float) -> npt.NDArray[np.fl
     return np.asarray(along_x + along_y, dtype=np.float32)
 
 
+def world_from_frame(
+    static: dict[str, TransformStamped], frame: str
+) -> tuple[npt.NDArray[np.float64], Rotation] | None:
+    """The pose of ``frame`` in the root of the transform tree, or None when it is not in it."""
+    translation = np.zeros(3)
+    rotation = Rotation.identity()
+    seen: set[str] = set()
+    if frame not in static:
+        return None
+    while frame in static and frame not in seen:  # `seen` stops a loop in bad data
+        seen.add(frame)
+        t = static[frame].transform
+        parent_rotation = Rotation.from_quat(
+            [t.rotation.x, t.rotation.y, t.rotation.z, t.rotation.w]
+        )
+        # parent <- frame applied after frame <- child: rotate, then shift.
+        shift = np.array([t.translation.x, t.translation.y, t.translation.z])
+        translation = parent_rotation.apply(translation) + shift
+        rotation = parent_rotation * rotation
+        frame = static[frame].header.frame_id
+    return translation, rotation
+
+
 class SceneLog:
     """Logs onebox messages to one Rerun recording; the key decides what a message becomes."""
 
@@ -125,6 +150,10 @@ class SceneLog:
         self._table_z_m = table_z_m
         self._table_size_m = table_size_m
         self._last_info: CameraInfo | None = None
+        self._static: dict[str, TransformStamped] = {}
+        """tf_static's transforms by child frame."""
+        self._have_pose = False
+        self._tf_pose_stamp_ns: int | None = None
 
     def start(self) -> None:
         """The static parts: the world's axes and the table."""
@@ -172,6 +201,8 @@ class SceneLog:
         if not name.startswith(prefix):
             return None
         rest = name.removeprefix(prefix)
+        if isinstance(message, (Image, CameraInfo)):
+            self._pose_from_tf(message.header.stamp_ns, message.header.frame_id)
         if isinstance(message, Image) and rest == "image_raw":
             self._time(message.header.stamp_ns)
             self.rec.log(f"{self._cam}/image/rgb", rr.Image(images.rgb(message)))
@@ -189,6 +220,7 @@ class SceneLog:
             self._camera_info(message)
             return "info"
         if isinstance(message, TransformStamped) and rest == "pose":
+            self._have_pose = True
             self._time(message.header.stamp_ns)
             t = message.transform
             self.rec.log(
@@ -235,7 +267,30 @@ class SceneLog:
             ),
         )
 
+    def _pose_from_tf(self, stamp_ns: int, frame_id: str) -> None:
+        """Place the camera by tf_static's chain to ``frame_id`` when no pose has come.
+
+        A recording without ``camera/pose`` (the committed capture) still shows the camera where
+        the transforms say, as the locator's tf_static fallback does.
+        """
+        if self._have_pose or stamp_ns == self._tf_pose_stamp_ns:
+            return
+        chain = world_from_frame(self._static, frame_id)
+        if chain is None:
+            return
+        translation, rotation = chain
+        self._tf_pose_stamp_ns = stamp_ns
+        self._time(stamp_ns)
+        self.rec.log(
+            self._cam,
+            rr.Transform3D(
+                translation=translation, quaternion=rr.Quaternion(xyzw=rotation.as_quat())
+            ),
+            rr.TransformAxes3D(AXIS_LENGTH_M),
+        )
+
     def _tf_static(self, message: TFMessage) -> None:
+        self._static.update({t.child_frame_id: t for t in message.transforms})
         parent_of = {t.child_frame_id: t.header.frame_id for t in message.transforms}
 
         def path(frame: str, depth: int = 0) -> str:

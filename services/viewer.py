@@ -21,7 +21,7 @@ The layout is the seed's config/one_box.rviz: the 3D view beside the colour and 
 Settings: viewer (environment VIEWER, config [viewer] viewer; the seed's rviz:=false). With
 ``VIEWER=false`` it logs "viewer off" and idles until stopped, so ``honcho start`` keeps the
 other processes running. --frames N stops after N complete captures (colour, depth, info, pose,
-points and detections of one stamp), --duration S after S seconds: for tests and benchmarks.
+points and detections of one stamp), --duration-s S after S seconds: for tests and benchmarks.
 A slow viewer keeps the newest message on each key and says how many it dropped.
 """
 
@@ -96,7 +96,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     settings.add(parser, "table_z", 0.0, "height of the table top, metres")
     parser.add_argument("--frames", type=int, help="stop after this many complete captures")
-    parser.add_argument("--duration", type=float, help="stop after this many seconds")
+    parser.add_argument("--duration-s", type=float, help="stop after this many seconds")
     bus.add_arguments(parser)
 
 
@@ -271,7 +271,7 @@ def main(args: argparse.Namespace) -> int:
         log.info("showing %s/*, tf_static, detections and sim/ground_truth", args.camera)
         dropped_reported = 0
         while args.frames is None or complete < args.frames:
-            if args.duration is not None and time.monotonic() - started > args.duration:
+            if args.duration_s is not None and time.monotonic() - started > args.duration_s:
                 break
             for name, message in inbox.take(timeout_s=0.5):
                 try:

@@ -69,7 +69,7 @@ def check_scene(held: dict, width: int = 320, height: int = 240) -> None:
 def test_viewer_saves_what_the_bus_carries(processes, test_bus, tmp_path):
     """Fed captures over Zenoh, --save writes an .rrd with pinhole, pictures, points and box."""
     out = tmp_path / "live.rrd"
-    proc = processes.start("viewer", "--save", str(out), "--frames", "1", "--duration", "60")
+    proc = processes.start("viewer", "--save", str(out), "--frames", "1", "--duration-s", "60")
     publish_until_exit(test_bus, proc)
     log = processes.stop(proc)
     assert proc.returncode == 0, log
@@ -82,7 +82,7 @@ def test_viewer_saves_what_the_bus_carries(processes, test_bus, tmp_path):
 def test_viewer_keeps_going_after_bad_messages(processes, test_bus, tmp_path):
     """Garbage and a picture whose step is wrong are reported by key; the viewer carries on."""
     out = tmp_path / "bad.rrd"
-    proc = processes.start("viewer", "--save", str(out), "--frames", "1", "--duration", "60")
+    proc = processes.start("viewer", "--save", str(out), "--frames", "1", "--duration-s", "60")
     raw = test_bus.session.declare_publisher("camera/image_raw")
     sheared = test_bus.publisher("camera/depth/image_raw", Image)
     bad_image = Image(width=320, height=240, encoding="32FC1", step=100, data=b"\0" * 100)

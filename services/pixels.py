@@ -1,0 +1,196 @@
+"""Print every pixel of the basic camera, then the depth readings of a patch (make camera.pixels).
+
+Waits for one capture of the 80 x 60 basic camera (a colour and a depth picture with the same
+stamp) and prints:
+
+  1. the colour picture, one 24-bit coloured square a pixel;
+  2. the depth picture the same way, in grey: near is bright, far is dark, and a pixel with no
+     reading is dark blue;
+  3. the depth readings, in metres, of a patch: by default rows 19-23 and columns 43-50, on the
+     left edge of the box, as the seed's section 5.2 shows them:
+
+              43     44     45     46     47     48     49     50
+  row 19   0.400  0.400  0.400  0.373  0.340  0.340  0.340  0.340
+
+Reads (under --namespace): CAMERA/image_raw (Image rgb8) and CAMERA/depth/image_raw (Image
+32FC1 metres, NaN = no reading), CAMERA being --camera (default basic_camera).
+Writes: the terminal only. Run it beside ``honcho start`` or ``onebox replay FILE.mcap``; when
+nothing arrives within --timeout-s it says how to start the simulation and exits 2.
+Almost every modern terminal shows 24-bit colour; if yours prints strange characters, try
+another, or pass --no-pictures for the table alone.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import threading
+from typing import NamedTuple
+
+import numpy as np
+import numpy.typing as npt
+
+from schemas import Image
+from services import bus, images
+from services.errors import NothingArrived, SettingError
+
+log = logging.getLogger("pixels")
+
+NO_READING_RGB = (20, 40, 160)
+RESET = "\x1b[0m"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--camera", default="basic_camera", help="whose pictures (default basic_camera)"
+    )
+    parser.add_argument(
+        "--rows",
+        type=int,
+        nargs=2,
+        default=(19, 23),
+        metavar=("FIRST", "LAST"),
+        help="the patch's rows, both included (default 19 23)",
+    )
+    parser.add_argument(
+        "--cols",
+        type=int,
+        nargs=2,
+        default=(43, 50),
+        metavar=("FIRST", "LAST"),
+        help="the patch's columns, both included (default 43 50)",
+    )
+    parser.add_argument(
+        "--no-pictures", action="store_true", help="print only the table of depth readings"
+    )
+    parser.add_argument(
+        "--timeout-s",
+        type=float,
+        default=10.0,
+        help="give up when no capture arrives in this time (default 10)",
+    )
+    bus.add_arguments(parser)
+
+
+def squares(rgb: npt.NDArray[np.uint8]) -> str:
+    """A picture as rows of two-space squares on a 24-bit background colour."""
+    lines = []
+    for row in rgb:
+        parts = []
+        previous: tuple[int, int, int] | None = None
+        for r, g, b in row.tolist():
+            # Only a change of colour needs a new escape; a flat table stays short.
+            if (r, g, b) != previous:
+                parts.append(f"\x1b[48;2;{r};{g};{b}m")
+                previous = (r, g, b)
+            parts.append("  ")
+        lines.append("".join(parts) + RESET)
+    return "\n".join(lines)
+
+
+def depth_grey(depth_m: npt.NDArray[np.float32]) -> npt.NDArray[np.uint8]:
+    """Depth as an rgb picture: the nearest reading white-ish, the farthest dark grey."""
+    out = np.empty((*depth_m.shape, 3), np.uint8)
+    out[:] = NO_READING_RGB
+    valid = np.isfinite(depth_m)
+    if valid.any():
+        near, far = float(depth_m[valid].min()), float(depth_m[valid].max())
+        span = far - near if far > near else 1.0
+        grey = 245 - (depth_m[valid] - near) / span * 185
+        out[valid] = np.round(grey).astype(np.uint8)[:, None]
+    return out
+
+
+def patch_table(
+    depth_m: npt.NDArray[np.float32], rows: tuple[int, int], cols: tuple[int, int]
+) -> str:
+    """The seed's table: column numbers on top, one line a row, metres to the millimetre."""
+    first_col, last_col = cols
+    columns = range(first_col, last_col + 1)
+    lines = [" " * 9 + "".join(f"{c:7d}" for c in columns)]
+    for r in range(rows[0], rows[1] + 1):
+        values = depth_m[r, first_col : last_col + 1]
+        lines.append(f"  row {r:<2d} " + "".join(f"{float(v):7.3f}" for v in values))
+    return "\n".join(lines)
+
+
+def check_patch(shape: tuple[int, ...], rows: tuple[int, int], cols: tuple[int, int]) -> None:
+    height, width = shape[:2]
+    for name, (first, last), size in (("rows", rows, height), ("cols", cols, width)):
+        if not 0 <= first <= last < size:
+            raise SettingError(
+                f"--{name} {first} {last}: the picture is {width} x {height}, so give "
+                f"0 <= FIRST <= LAST <= {size - 1}"
+            )
+
+
+class Capture(NamedTuple):
+    """One capture's pictures, decoded."""
+
+    stamp_ns: int
+    rgb: npt.NDArray[np.uint8]
+    depth_m: npt.NDArray[np.float32]
+
+
+def wait_for_capture(b: bus.Bus, camera: str, timeout_s: float) -> Capture:
+    """The first colour and depth picture of ``camera`` with the same stamp.
+
+    Pictures are decoded as they arrive, so a bad one is logged with its key and skipped.
+    """
+    colour_key, depth_key = f"{camera}/image_raw", f"{camera}/depth/image_raw"
+    colours: dict[int, npt.NDArray[np.uint8]] = {}
+    depths: dict[int, npt.NDArray[np.float32]] = {}
+    found: list[Capture] = []
+    done = threading.Event()
+    lock = threading.Lock()
+
+    def on_image(key: str, image: Image) -> None:
+        name = b.unkey(key)
+        stamp = image.header.stamp_ns
+        with lock:
+            if done.is_set():
+                return
+            if name == colour_key:
+                colours[stamp] = images.rgb(image)
+            elif name == depth_key:
+                depths[stamp] = images.depth_m(image)
+            if stamp in colours and stamp in depths:
+                found.append(Capture(stamp, colours[stamp], depths[stamp]))
+                done.set()
+            # A pair turns up within a few captures; keep the waiting pictures few.
+            for pictures in (colours, depths):
+                while len(pictures) > 10:
+                    del pictures[next(iter(pictures))]
+
+    b.subscribe(colour_key, Image, on_image)
+    b.subscribe(depth_key, Image, on_image)
+    log.info("waiting for one capture on %s and %s", b.key(colour_key), b.key(depth_key))
+    if not done.wait(timeout_s):
+        with lock:
+            got = [
+                key for key, pictures in ((colour_key, colours), (depth_key, depths)) if pictures
+            ]
+        raise NothingArrived(
+            f"no capture of {camera} within {timeout_s:g} s"
+            + (f" (only {', '.join(got)})" if got else "")
+            + ": start the simulation with `honcho start` (or `onebox sim`), or replay one with "
+            "`onebox replay tests/data/one_box.mcap`, then run this again"
+        )
+    return found[0]
+
+
+def main(args: argparse.Namespace) -> int:
+    rows = (int(args.rows[0]), int(args.rows[1]))
+    cols = (int(args.cols[0]), int(args.cols[1]))
+    with bus.open_bus(args) as b:
+        capture = wait_for_capture(b, args.camera, args.timeout_s)
+    height, width = capture.depth_m.shape
+    check_patch(capture.depth_m.shape, rows, cols)
+    if not args.no_pictures:
+        print(f"{args.camera}: {width} x {height}, colour at {capture.stamp_ns / 1e9:.3f} s")
+        print(squares(capture.rgb))
+        print(f"{args.camera}: depth (near = bright, no reading = blue)")
+        print(squares(depth_grey(capture.depth_m)))
+    print(f"{args.camera}: depth in metres, rows {rows[0]}-{rows[1]}, columns {cols[0]}-{cols[1]}")
+    print(patch_table(capture.depth_m, rows, cols))
+    return 0
