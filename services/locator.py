@@ -348,7 +348,7 @@ class Locator:
                 is_bigendian=image.is_bigendian,
             )
         except measure.ImageError as e:
-            self._report.warn(key, "image", f"dropped: {e}")
+            self._report.warn(key, e.kind, f"dropped: {e}")
             return
         stamp_ns = image.header.stamp_ns
         if not self._stamp_ok(key, stamp_ns):

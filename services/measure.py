@@ -47,7 +47,15 @@ TOP_TOLERANCE_M = 0.001
 
 
 class ImageError(ValueError):
-    """Bytes that cannot be the picture their header describes; the message says why."""
+    """Bytes that cannot be the picture their header describes; the message says why.
+
+    ``kind`` names what is wrong (``encoding``, ``size`` or ``step``), so a caller reporting
+    problems once per kind reports each of them.
+    """
+
+    def __init__(self, message: str, kind: str) -> None:
+        super().__init__(message)
+        self.kind = kind
 
 
 @dataclass(frozen=True)
@@ -108,16 +116,19 @@ def _pixels(
 ) -> npt.NDArray[np.generic]:
     """A height x width x channels view of ``data`` (no copy), after checking every length."""
     if width <= 0 or height <= 0:
-        raise ImageError(f"the picture is {width} x {height}; both must be at least 1")
+        raise ImageError(f"the picture is {width} x {height}; both must be at least 1", "size")
     row_bytes = width * itemsize
     if step < row_bytes:
         raise ImageError(
             f"step is {step} bytes but one row of {width} pixels needs {row_bytes}; "
-            "step counts bytes, not pixels"
+            "step counts bytes, not pixels",
+            "step",
         )
     if len(data) != step * height:
         raise ImageError(
-            f"data is {len(data):,} bytes but step x height = {step} x {height} = {step * height:,}"
+            f"data is {len(data):,} bytes but step x height = {step} x {height} = "
+            f"{step * height:,}",
+            "size",
         )
     channels = itemsize // dtype.itemsize
     return np.ndarray(
@@ -140,7 +151,8 @@ def depth_metres(
     if encoding not in DEPTH_ENCODINGS:
         raise ImageError(
             f"encoding {encoding!r} is not a depth picture; expected one of "
-            f"{', '.join(DEPTH_ENCODINGS)}"
+            f"{', '.join(DEPTH_ENCODINGS)}",
+            "encoding",
         )
     dtype = np.dtype(("<", ">")[bool(is_bigendian)] + DEPTH_ENCODINGS[encoding])
     raw = _pixels(data, width, height, step, dtype.itemsize, dtype)[:, :, 0]
@@ -161,7 +173,8 @@ def colour_rgb(
     if encoding not in COLOUR_ENCODINGS:
         raise ImageError(
             f"encoding {encoding!r} is not a colour picture; expected one of "
-            f"{', '.join(COLOUR_ENCODINGS)}"
+            f"{', '.join(COLOUR_ENCODINGS)}",
+            "encoding",
         )
     itemsize, order = COLOUR_ENCODINGS[encoding]
     pixels = _pixels(data, width, height, step, itemsize, np.dtype(np.uint8))

@@ -134,7 +134,7 @@ class Points:
                 is_bigendian=image.is_bigendian,
             )
         except measure.ImageError as e:
-            self._report.warn(key, "image", f"dropped: {e}")
+            self._report.warn(key, e.kind, f"dropped: {e}")
             return
         self._offer(key, "depth", image.header.stamp_ns, (image.header, depth_m))
 
@@ -148,7 +148,7 @@ class Points:
                 encoding=image.encoding,
             )
         except measure.ImageError as e:
-            self._report.warn(key, "image", f"dropped: {e}")
+            self._report.warn(key, e.kind, f"dropped: {e}")
             return
         self._offer(key, "colour", image.header.stamp_ns, rgb)
 

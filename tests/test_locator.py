@@ -1,0 +1,376 @@
+"""onebox locator as a real process on a private router: replayed, end to end, and fed garbage."""
+
+from __future__ import annotations
+
+import re
+import signal
+import subprocess
+import threading
+import time
+
+import msgspec
+import numpy as np
+import pytest
+
+from schemas import (
+    CameraInfo,
+    Detection3DArray,
+    GroundTruth,
+    Image,
+    TFMessage,
+    TransformStamped,
+    codec,
+)
+from services import bus
+from services.frames import FrameTree, matrix_of
+from services.locator import StampMatcher
+from tests.capture import CAPTURE
+from tests.conftest import Inbox, has_key
+from tests.synthetic import (
+    Scene,
+    camera_info,
+    camera_pose,
+    depth_image,
+    depth_picture,
+    tf_static,
+)
+
+SEED_LINE = "box: middle (+0.064, +0.040) m, height 0.060 m, from 2,401 points on its top"
+SECOND_NS = 1_000_000_000
+
+
+class Output:
+    """Collects a process's output lines as they come, so a test can wait on a log line."""
+
+    def __init__(self, proc: subprocess.Popen[str]) -> None:
+        self.proc = proc
+        self.lines: list[str] = []
+        self._cond = threading.Condition()
+        self._thread = threading.Thread(target=self._read, daemon=True)
+        self._thread.start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            with self._cond:
+                self.lines.append(line.rstrip("\n"))
+                self._cond.notify_all()
+
+    def wait_for(self, pattern: str, timeout_s: float = 20.0) -> str:
+        """The first line matching ``pattern`` (a regular expression)."""
+        regex = re.compile(pattern)
+
+        def found() -> str | None:
+            return next((line for line in self.lines if regex.search(line)), None)
+
+        with self._cond:
+            if not self._cond.wait_for(lambda: found() is not None, timeout=timeout_s):
+                raise AssertionError(
+                    f"no line matching {pattern!r} in {timeout_s} s:\n" + self.text
+                )
+            line = found()
+            assert line is not None
+            return line
+
+    @property
+    def text(self) -> str:
+        return "\n".join(self.lines)
+
+    def stop(self) -> str:
+        """SIGTERM the process, wait for it and return everything it printed."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+        try:
+            self.proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        self._thread.join(timeout=5)
+        if self.proc.stdout is not None:
+            self.proc.stdout.close()
+        return self.text
+
+
+@pytest.fixture
+def locators(processes):
+    """Starts ``onebox locator`` processes whose output a test can wait on; stops them all."""
+    started: list[Output] = []
+
+    def start(*flags: str) -> Output:
+        output = Output(processes.start("locator", "--log-interval-s", "0.5", *flags))
+        started.append(output)
+        output.wait_for("finding the box")
+        return output
+
+    yield start
+    for output in started:
+        output.stop()
+
+
+def decode_detections(items: list[tuple[str, bytes]]) -> list[Detection3DArray]:
+    decoder = codec(Detection3DArray)
+    return [decoder.decode(p) for k, p in items if k == "detections"]
+
+
+class Camera:
+    """Publishes synthetic captures from the test, as the sim would."""
+
+    def __init__(self, b: bus.Bus, scene: Scene | None = None, prefix: str = "") -> None:
+        self.scene = scene = scene or Scene()
+        self.depth = b.publisher(f"{prefix}camera/depth/image_raw", Image)
+        self.info = b.publisher(f"{prefix}camera/camera_info", CameraInfo)
+        self.pose = b.publisher(f"{prefix}camera/pose", TransformStamped)
+        self.tf = b.publisher(f"{prefix}tf_static", TFMessage, latched=True)
+        self.picture = depth_picture(scene)
+        self.stamp_ns = 0
+
+    def publish_tf(self) -> None:
+        self.tf.publish(tf_static(self.scene.mount_height))
+
+    def capture(self, *, depth: Image | None = None, info: bool = True) -> int:
+        self.stamp_ns += SECOND_NS // 5
+        self.pose.publish(camera_pose(self.scene.mount_height, self.stamp_ns))
+        if info:
+            self.info.publish(camera_info(self.scene, self.stamp_ns))
+        self.depth.publish(depth or depth_image(self.picture, self.stamp_ns))
+        return self.stamp_ns
+
+    def until_measured(self, inbox: Inbox, timeout_s: float = 20.0) -> Detection3DArray:
+        """Publish captures until one comes back measured (the locator may still be joining)."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            stamp = self.capture()
+
+            def measured(items: list[tuple[str, bytes]], stamp: int = stamp) -> bool:
+                return any(d.header.stamp_ns == stamp for d in decode_detections(items))
+
+            try:
+                items = inbox.wait(measured, timeout_s=0.5)
+            except AssertionError:
+                continue
+            return next(d for d in decode_detections(items) if d.header.stamp_ns == stamp)
+        raise AssertionError("the locator measured nothing")
+
+
+def assert_default_box(array: Detection3DArray) -> None:
+    scene = Scene()
+    assert array.header.frame_id == "world"
+    [detection] = array.detections
+    centre = detection.bbox.center.position
+    assert detection.results[0].class_id == "box"
+    assert 0.5 < detection.results[0].score <= 1.0
+    assert abs(centre.x - scene.box_x) < 0.001 and abs(centre.y - scene.box_y) < 0.001
+    assert centre.z == pytest.approx(scene.box_size / 2, abs=1e-6)
+    assert detection.bbox.size.z == pytest.approx(scene.box_size, abs=1e-6)
+    assert detection.bbox.size.x == pytest.approx(scene.box_size, abs=0.002)
+
+
+# --- unit: matching by stamp ---------------------------------------------------------------------
+
+
+def test_matcher_pairs_equal_stamps_and_newest_wins():
+    """Equal stamps pair in any order; an older unmatched lead is reported when a newer pairs."""
+    lost = []
+    matcher = StampMatcher(["depth", "info"], on_unmatched=lambda s, why: lost.append(s.stamp_ns))
+    assert matcher.add("depth", 1, "d1") is None
+    assert matcher.add("depth", 2, "d2") is None
+    found = matcher.add("info", 2, "i2")
+    assert found is not None and (found["depth"].item, found["info"].item) == ("d2", "i2")
+    assert lost == [1]
+    assert matcher.add("info", 3, "i3") is None
+    found = matcher.add("depth", 3, "d3")
+    assert found is not None and found["info"].item == "i3"
+
+
+def test_matcher_with_slop_pairs_the_nearest():
+    """Within the slop the nearest stamp pairs; beyond it nothing does."""
+    matcher = StampMatcher(["depth", "info"], slop_ns=5)
+    matcher.add("info", 100, "far")
+    matcher.add("info", 197, "near")
+    found = matcher.add("depth", 200, "d")
+    assert found is not None and found["info"].item == "near"
+    assert matcher.add("depth", 300, "d2") is None
+
+
+# --- the real process, synthetic captures --------------------------------------------------------
+
+
+def test_synthetic_capture_is_detected_and_logged(locators, test_bus, inbox):
+    """Depth + info + tf_static give a detection at the box and the seed-style line."""
+    test_bus.subscribe_raw("detections", inbox)
+    camera = Camera(test_bus)
+    camera.publish_tf()
+    output = locators()
+    assert_default_box(camera.until_measured(inbox))
+    output.wait_for(r"box: middle \(\+0\.064, \+0\.040\) m, height 0\.060 m, from 2,352 points")
+    assert "Traceback" not in output.stop()
+
+
+def test_pose_source_pose_agrees_with_tf(locators, test_bus, inbox):
+    """--pose-source pose (stamp-matched camera/pose) measures what tf_static gives."""
+    test_bus.subscribe_raw("detections", inbox)
+    camera = Camera(test_bus)
+    camera.publish_tf()
+    assert np.allclose(
+        FrameTree(tf_static(0.4).transforms).lookup("world", "camera_optical_frame"),
+        matrix_of(camera_pose(0.4, 0)),
+        atol=1e-12,
+    )
+    output = locators("--pose-source", "pose")
+    by_pose = camera.until_measured(inbox)
+    assert_default_box(by_pose)
+    output.stop()
+    locators("--pose-source", "tf")
+    by_tf = camera.until_measured(inbox)
+    assert by_tf.detections[0].bbox == by_pose.detections[0].bbox
+
+
+def test_no_box_gives_an_empty_array_and_the_no_box_line(locators, test_bus, inbox):
+    """An empty table: an empty Detection3DArray, and the log says no box is in view."""
+    test_bus.subscribe_raw("detections", inbox)
+    camera = Camera(test_bus, Scene(has_box=False))
+    camera.publish_tf()
+    output = locators()
+    array = camera.until_measured(inbox)
+    assert array.detections == [] and array.header.frame_id == "world"
+    output.wait_for("no box in view")
+
+
+def test_every_bad_input_is_reported_and_the_locator_keeps_measuring(locators, test_bus, inbox):
+    """Each unusable message gives its log line, nothing crashes, and a good capture still works."""
+    test_bus.subscribe_raw("detections", inbox)
+    camera = Camera(test_bus)
+    camera.publish_tf()
+    output = locators()
+    camera.until_measured(inbox)
+    raw_depth = test_bus.session.declare_publisher("camera/depth/image_raw")
+    raw_info = test_bus.session.declare_publisher("camera/camera_info")
+    try:
+        good = depth_image(camera.picture, 0)
+
+        def bad(frame_id: str = "camera_optical_frame", **changes) -> Image:
+            """The good picture, stamped as the next capture, with ``changes``."""
+            header = msgspec.structs.replace(
+                good.header, stamp_ns=camera.stamp_ns + SECOND_NS // 5, frame_id=frame_id
+            )
+            return msgspec.structs.replace(good, header=header, **changes)
+
+        cases: list[tuple[str, object]] = [
+            ("not a onebox.sensor.Image", lambda: raw_depth.put(b"\x00garbage\xff")),
+            (
+                "camera/camera_info: not a onebox.sensor.CameraInfo",
+                lambda: raw_info.put(codec(Image).encode(good)),
+            ),
+            ("is not a depth picture", lambda: camera.capture(depth=bad(encoding="rgb8"))),
+            (r"step x height", lambda: camera.capture(depth=bad(height=239))),
+            (r"step counts bytes", lambda: camera.capture(depth=bad(step=320))),
+            (
+                "has no reading at all",
+                lambda: camera.capture(
+                    depth=bad(data=np.full((240, 320), np.nan, "<f4").tobytes())
+                ),
+            ),
+            ("no transform from 'elsewhere'", lambda: camera.capture(depth=bad("elsewhere"))),
+            ("no camera/camera_info with that stamp", lambda: camera.capture(info=False)),
+            ("stamp went back", lambda: camera.depth.publish(depth_image(camera.picture, 1))),
+        ]
+        for line, send in cases:
+            send()
+            output.wait_for(re.escape(line) if "\\" not in line else line)
+        lens = test_bus.publisher("camera/camera_info", CameraInfo)
+        zero_fx = camera_info(camera.scene, camera.stamp_ns + 1)
+        lens.publish(msgspec.structs.replace(zero_fx, k=[0.0] * 9))
+        output.wait_for("fx and fy must be > 0")
+        assert output.proc.poll() is None
+        assert_default_box(camera.until_measured(inbox))
+    finally:
+        raw_depth.undeclare()
+        raw_info.undeclare()
+    assert "Traceback" not in output.stop()
+
+
+# --- replayed capture ----------------------------------------------------------------------------
+
+
+@pytest.mark.skipif(not CAPTURE.exists(), reason=f"{CAPTURE} is not committed yet")
+def test_replayed_capture_gives_the_seed_detection(locators, processes, test_bus, inbox):
+    """onebox replay of the committed capture into a real locator: (+0.064, +0.040), 0.060 m."""
+    test_bus.subscribe_raw("detections", inbox)
+    output = locators()
+    replay = processes.start("replay", str(CAPTURE), "--loop")
+    inbox.wait(has_key("detections"))
+    processes.stop(replay)
+    array = decode_detections(inbox.items)[0]
+    [detection] = array.detections
+    centre = detection.bbox.center.position
+    assert f"({centre.x:+.3f}, {centre.y:+.3f}) {detection.bbox.size.z:.3f}" == (
+        "(+0.064, +0.040) 0.060"
+    )
+    output.wait_for(re.escape(SEED_LINE))
+
+
+# --- end to end with the sim ---------------------------------------------------------------------
+
+
+def truths(items: list[tuple[str, bytes]]) -> dict[int, GroundTruth]:
+    decoder = codec(GroundTruth)
+    return {
+        t.header.stamp_ns: t
+        for t in (decoder.decode(p) for k, p in items if k == "sim/ground_truth")
+    }
+
+
+def matched(items) -> list[tuple[Detection3DArray, GroundTruth]]:
+    by_stamp = truths(items)
+    return [
+        (d, by_stamp[d.header.stamp_ns])
+        for d in decode_detections(items)
+        if d.header.stamp_ns in by_stamp
+    ]
+
+
+def test_end_to_end_with_the_sim(locators, processes, test_bus, inbox):
+    """Router, sim and locator: the seed's line, a detection within 1 mm of the truth; moving the
+    box moves it; no box gives the no-box line and empty arrays; tf and camera/pose agree."""
+    for key in ("detections", "sim/ground_truth", "camera/pose", "tf_static"):
+        test_bus.subscribe_raw(key, inbox, history=key == "tf_static")
+    output = locators("--log-interval-s", "2")  # the seed's line, every 2 s
+    sim = processes.start("sim", "--rate-hz", "10", "--frames", "30")
+    started = time.monotonic()
+    inbox.wait(lambda items: len(matched(items)) >= 3, timeout_s=30)
+    output.wait_for(re.escape(SEED_LINE), timeout_s=30 - (time.monotonic() - started))
+    detection, truth = matched(inbox.items)[-1]
+    assert truth.box_pose is not None
+    centre, true_centre = detection.detections[0].bbox.center.position, truth.box_pose.position
+    assert abs(centre.x - true_centre.x) < 0.001 and abs(centre.y - true_centre.y) < 0.001
+    assert abs(centre.z - true_centre.z) < 0.001
+    # The fixed camera: the chain on tf_static and the stamped camera/pose agree.
+    tf = next(codec(TFMessage).decode(p) for k, p in inbox.items if k == "tf_static")
+    pose = next(codec(TransformStamped).decode(p) for k, p in inbox.items if k == "camera/pose")
+    np.testing.assert_allclose(
+        FrameTree(tf.transforms).lookup("world", "camera_optical_frame"),
+        matrix_of(pose),
+        atol=1e-6,
+    )
+    processes.stop(sim)
+
+    inbox.items.clear()
+    sim = processes.start(
+        "sim", "--rate-hz", "10", "--frames", "30", "--box-x", "-0.1", "--box-y", "0.06"
+    )
+    inbox.wait(lambda items: len(matched(items)) >= 2, timeout_s=30)
+    detection, truth = matched(inbox.items)[-1]
+    centre = detection.detections[0].bbox.center.position
+    assert truth.box_pose is not None
+    assert abs(centre.x - (-0.1)) < 0.002 and abs(centre.y - 0.06) < 0.002
+    assert abs(centre.x - truth.box_pose.position.x) < 0.001
+    processes.stop(sim)
+
+    inbox.items.clear()
+    sim = processes.start("sim", "--rate-hz", "10", "--frames", "30", "--no-box")
+    inbox.wait(lambda items: len(matched(items)) >= 2, timeout_s=30)
+    assert all(d.detections == [] for d, _ in matched(inbox.items))
+    output.wait_for("no box in view")
+    processes.stop(sim)
+    assert "Traceback" not in output.stop()
+    assert output.text.count("stamp went back") <= 2  # each new sim starts its clock at 0
