@@ -214,6 +214,10 @@ def finishing(path: Path) -> Iterator[None]:
 
 def main(args: argparse.Namespace) -> int:
     exprs = key_expressions(args.keys)
+    if args.out.exists() and not args.overwrite:  # say so before connecting to anything
+        raise RecordingError(
+            f"{args.out} already exists: delete it, choose another name, or pass --overwrite"
+        )
     if args.chunk_size_mb <= 0 or args.flush_interval_s <= 0 or args.queue_mb <= 0:
         raise RecordingError(
             "--chunk-size-mb, --flush-interval-s and --queue-mb must be more than 0"

@@ -349,7 +349,7 @@ def _recovered_records(path: Path, f: io.BufferedReader) -> Iterator[Any]:
         except StopIteration:
             return
         except (McapError, struct.error, EOFError, ValueError) as e:
-            log.warning("%s: stopped at a record cut short (%s)", path, type(e).__name__)
+            log.info("%s: stopped at a record cut short (%s)", path, type(e).__name__)
             return
         if isinstance(record, Chunk):
             try:

@@ -8,9 +8,10 @@ Reads: FILE.mcap (a file cut short by a killed recorder needs ``--recover``).
 Writes: each recorded key, as recorded (under ``--namespace`` when given), the recorded bytes
 unchanged, in log-time order, spaced as recorded divided by ``--rate`` (0: as fast as
 possible). ``--loop`` pauses between passes for the recording's mean spacing (a snapshot
-repeats at 5 Hz). Publishers block rather than drop, so a slow subscriber slows the replay instead
-of losing messages. ``tf_static`` is published latched, so a process that starts during the
-replay still receives it.
+repeats at 5 Hz). Publishers block rather than drop, so a slow subscriber slows the replay
+instead of losing messages; replay waits up to ``--wait-s`` for a subscriber before it starts,
+so the first messages are not published to nobody. ``tf_static`` is published latched, so a
+process that starts during the replay still receives it.
 ``clock``: when the recording has a ``clock`` channel it is replayed like any other key;
 otherwise a Clock is synthesised from the header stamps (the publish times of keys whose type
 has a header) and published on ``clock`` just before the first message of each new stamp, so
@@ -38,6 +39,7 @@ log = logging.getLogger("replay")
 CLOCK = "clock"
 TF_STATIC = "tf_static"
 MIN_PERIOD_S = 0.2
+LINGER_S = 0.3
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -57,6 +59,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--no-clock", action="store_true", help="neither replay nor synthesise clock"
+    )
+    parser.add_argument(
+        "--wait-s",
+        type=float,
+        default=2.0,
+        help="wait this long for a subscriber before starting (default 2; 0 to start at once)",
     )
     parser.add_argument(
         "--recover",
@@ -159,6 +167,24 @@ def replay_once(
     return count
 
 
+def wait_for_subscribers(b: bus.Bus, timeout_s: float) -> bool:
+    """Wait until this session knows of a subscriber to any key, at most ``timeout_s``.
+
+    A new session learns the routes to existing subscribers a few ms after it opens; what it
+    publishes before that reaches nobody, which would cost a replay its first messages.
+    """
+    probe = b.session.declare_publisher(b.key("**"))
+    try:
+        deadline = time.monotonic() + timeout_s
+        while not probe.matching_status.matching:
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(0.01)  # polling the matching status; zenoh-python has no wait for it
+        return True
+    finally:
+        probe.undeclare()
+
+
 def main(args: argparse.Namespace) -> int:
     path: Path = args.file
     info = describe(path, recover=args.recover)
@@ -188,6 +214,8 @@ def main(args: argparse.Namespace) -> int:
         how,
     )
     with bus.open_bus(args) as b:
+        if not wait_for_subscribers(b, args.wait_s):
+            log.info("no subscriber yet after %g s; replaying anyway", args.wait_s)
         publishers: dict[str, bus.Publisher[Message]] = {}
         clock = None
         if not has_clock and not args.no_clock:
@@ -210,5 +238,8 @@ def main(args: argparse.Namespace) -> int:
         finally:
             if sys.stderr.isatty():
                 sys.stderr.write("\n")
+            # Zenoh has no flush: give what is still queued for the network time to leave
+            # before the session closes, or the last messages of a fast replay are lost.
+            time.sleep(LINGER_S)
     log.info("replayed %s (%d passes)", path, passes)
     return 0
