@@ -26,6 +26,7 @@ import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import zenoh
 
@@ -173,7 +174,8 @@ def wait_for_subscribers(b: bus.Bus, timeout_s: float) -> bool:
     A new session learns the routes to existing subscribers a few ms after it opens; what it
     publishes before that reaches nobody, which would cost a replay its first messages.
     """
-    probe = b.session.declare_publisher(b.key("**"))
+    # zenoh's stubs call matching_status a bool; at run time it is a MatchingStatus.
+    probe: Any = b.session.declare_publisher(b.key("**"))
     try:
         deadline = time.monotonic() + timeout_s
         while not probe.matching_status.matching:
