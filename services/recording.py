@@ -261,8 +261,9 @@ class RecordingWriter:
             stamp = stamp_ns(payload)
             publish_time_ns = log_time_ns if stamp is None else stamp
             if stamp is not None:
-                self.sim_start_ns = min(stamp, self.sim_start_ns or stamp)
-                self.sim_end_ns = max(stamp, self.sim_end_ns or stamp)
+                start, end = self.sim_start_ns, self.sim_end_ns
+                self.sim_start_ns = stamp if start is None else min(start, stamp)
+                self.sim_end_ns = stamp if end is None else max(end, stamp)
         self._sequence += 1
         self._writer.add_message(
             channel_id=self.channel(key),
