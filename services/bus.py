@@ -178,6 +178,29 @@ class Publisher(Generic[M]):
         """Send bytes already encoded (a replay sends exactly what was recorded)."""
         self._publisher.put(payload)
 
+    def wait_for_subscribers(self, timeout_s: float) -> bool:
+        """Block until some subscriber matches this key (or ``timeout_s`` passes); True if one does.
+
+        Declarations travel through the router, so a sample put right after a subscriber
+        opened elsewhere can miss it; waiting here is waiting on Zenoh's matching listener.
+        """
+        return wait_for_match(self._publisher, timeout_s)
+
+
+def wait_for_match(publisher: Any, timeout_s: float) -> bool:
+    """Wait on a Zenoh publisher's matching listener until a subscriber matches."""
+    matched = threading.Event()
+
+    def on_status(status: zenoh.MatchingStatus) -> None:
+        if status.matching:
+            matched.set()
+
+    listener = publisher.declare_matching_listener(on_status)
+    try:
+        return bool(publisher.matching_status) or matched.wait(timeout_s)
+    finally:
+        listener.undeclare()
+
 
 @dataclass
 class Bus:
