@@ -8,6 +8,7 @@ Good enough to drive the tools without a simulator; the seed's numbers come from
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 
@@ -30,7 +31,9 @@ from schemas import (
     Transform,
     TransformStamped,
     Vector3,
+    codec,
 )
+from services.recording import RecordingWriter
 
 OPTICAL = "camera_optical_frame"
 BOX_CENTRE = (0.065, 0.0405, 0.03)
@@ -150,3 +153,13 @@ def tf_static() -> TFMessage:
             ),
         ]
     )
+
+
+def write_mcap(path: Path, captures: int = 3, period_ns: int = 200_000_000) -> Path:
+    """An .mcap as ``onebox record`` writes it: tf_static, then ``captures`` whole captures."""
+    with RecordingWriter(path) as writer:
+        writer.add("tf_static", codec(TFMessage).encode(tf_static()), log_time_ns=1)
+        for i in range(1, captures + 1):
+            for key, message in capture(i * period_ns).items():
+                writer.add(key, codec(type(message)).encode(message), log_time_ns=1 + i * period_ns)
+    return path

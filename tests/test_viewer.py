@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import subprocess
+import sys
 import urllib.request
 
 import numpy as np
@@ -11,8 +12,8 @@ import rerun as rr
 
 from schemas import Image, TFMessage, codec, type_for_key
 from services import rerun_log
-from tests.conftest import free_port
-from tests.fake_capture import BOX_CENTRE, BOX_SIZE, capture, tf_static
+from tests.conftest import ROOT, free_port
+from tests.fake_capture import BOX_CENTRE, BOX_SIZE, capture, tf_static, write_mcap
 from tests.rrd import contents, wait_for_output
 
 
@@ -162,3 +163,53 @@ def test_every_pipeline_type_round_trips_through_scene_log(tmp_path):
         "camera/points": "points",
         "detections": "detections",
     }
+
+
+def test_view_writes_an_rrd_of_a_recording(tmp_path):
+    """onebox view FILE.mcap --save OUT.rrd shows a recording as the live viewer would."""
+    recording = write_mcap(tmp_path / "fake.mcap", captures=2)
+    out = tmp_path / "view.rrd"
+    done = subprocess.run(
+        [sys.executable, "-m", "services.cli", "view", str(recording), "--save", str(out)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == 0, done.stderr
+    assert "13 messages shown" in done.stdout
+    held = contents(out)
+    check_scene(held)
+    stamps = {t.total_seconds() for t in held["/world/camera/image/rgb"]["_times"]}
+    assert stamps == {0.2, 0.4}, "each capture at its own simulated time"
+
+
+def test_view_of_a_missing_file_is_one_clear_line(tmp_path):
+    """A path that does not exist: exit 2 and a line naming it, no traceback."""
+    missing = tmp_path / "nope.mcap"
+    done = subprocess.run(
+        [sys.executable, "-m", "services.cli", "view", str(missing), "--save", str(tmp_path / "x")],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == 2
+    assert str(missing) in done.stderr and "Traceback" not in done.stderr
+
+
+def test_camera_sits_on_the_tf_static_chain_until_a_pose_arrives(tmp_path):
+    """Without camera/pose the pinhole is placed by world -> camera_link -> optical frame."""
+    out = tmp_path / "tf.rrd"
+    rec = rr.RecordingStream("onebox_test")
+    rec.save(out)
+    msgs = capture(200_000_000)
+    with rec:
+        scene = rerun_log.SceneLog(rec)
+        scene.log("tf_static", tf_static())
+        scene.log("camera/image_raw", msgs["camera/image_raw"])
+    camera = contents(out)["/world/camera"]
+    assert camera["Transform3D:translation"][0] == pytest.approx([0, 0, 0.4])
+    # Looking straight down: optical x = world +x, y = world -y, z = world -z.
+    x, y, z, w = camera["Transform3D:quaternion"][0]
+    assert abs(x) == pytest.approx(1.0) and y == z == w == pytest.approx(0.0, abs=1e-9)
