@@ -25,6 +25,7 @@ import argparse
 import collections
 import contextlib
 import logging
+import shutil
 import signal
 import sys
 import threading
@@ -135,7 +136,9 @@ class Progress:
         if not self._tty or (not force and now - self._last_draw < 0.5):
             return
         self._last_draw = now
-        self._stream.write("\r\x1b[K" + self.line(dropped))
+        # Cut to the terminal's width: a wrapped line would not be redrawn in place.
+        columns = shutil.get_terminal_size().columns
+        self._stream.write("\r\x1b[K" + self.line(dropped)[: max(columns - 1, 20)])
         self._stream.flush()
 
     def end(self) -> None:
