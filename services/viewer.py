@@ -20,8 +20,8 @@ The layout is the seed's config/one_box.rviz: the 3D view beside the colour and 
 
 Settings: viewer (environment VIEWER, config [viewer] viewer; the seed's rviz:=false). With
 ``VIEWER=false`` it logs "viewer off" and idles until stopped, so ``honcho start`` keeps the
-other processes running. --frames N stops after N complete captures (colour, depth, info, pose,
-points and detections of one stamp), --duration-s S after S seconds: for tests and benchmarks.
+other processes running. --frames N stops after N complete captures (colour, depth, info, points
+and detections of one stamp), --duration-s S after S seconds: for tests and benchmarks.
 A slow viewer keeps the newest message on each key and says how many it dropped.
 """
 
@@ -59,8 +59,9 @@ from services.images import ImageError
 log = logging.getLogger("viewer")
 
 APPLICATION_ID = "onebox"
-COMPLETE = frozenset({"colour", "depth", "info", "pose", "points", "detections"})
-"""What one capture must have logged to count towards --frames."""
+COMPLETE = frozenset({"colour", "depth", "info", "points", "detections"})
+"""What one capture must have logged to count towards --frames. Not the pose: a recording
+without one (the committed capture) places the camera by tf_static instead."""
 
 
 class ViewerError(OneboxError):

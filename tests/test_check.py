@@ -5,10 +5,9 @@ from __future__ import annotations
 import subprocess
 import sys
 
-import pytest
-
 from schemas import TYPES, CameraInfo, Header, Image
 from services import check
+from services.recording import describe
 from tests.conftest import CAPTURE, ROOT, free_port
 from tests.fake_capture import write_mcap
 
@@ -61,11 +60,8 @@ def test_check_lists_a_replay_with_types_rates_lens_and_one_of_each(processes, t
     assert len(out) < 20_000, "the large arrays must be left out"
 
 
-@pytest.mark.skipif(not CAPTURE.exists(), reason="the committed capture is not there yet")
 def test_check_lists_every_key_of_the_committed_capture(processes):
     """Replaying tests/data/one_box.mcap, check lists each of its keys with its type."""
-    from services.recording import describe
-
     keys = {k.key: k.schema_name for k in describe(CAPTURE).keys}
     processes.start("replay", str(CAPTURE), "--loop")
     done = run_check(processes.endpoint, "--window-s", "2")

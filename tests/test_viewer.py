@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import signal
 import subprocess
 import sys
 import urllib.request
@@ -10,9 +12,9 @@ import numpy as np
 import pytest
 import rerun as rr
 
-from schemas import Image, TFMessage, codec, type_for_key
+from schemas import Detection3DArray, Image, TFMessage, codec, type_for_key
 from services import rerun_log
-from tests.conftest import ROOT, free_port
+from tests.conftest import CAPTURE, ROOT, free_port
 from tests.fake_capture import BOX_CENTRE, BOX_SIZE, capture, tf_static, write_mcap
 from tests.rrd import contents, wait_for_output
 
@@ -213,3 +215,66 @@ def test_camera_sits_on_the_tf_static_chain_until_a_pose_arrives(tmp_path):
     # Looking straight down: optical x = world +x, y = world -y, z = world -z.
     x, y, z, w = camera["Transform3D:quaternion"][0]
     assert abs(x) == pytest.approx(1.0) and y == z == w == pytest.approx(0.0, abs=1e-9)
+
+
+def test_viewer_fed_a_replay_of_the_committed_capture(processes, test_bus, tmp_path):
+    """Replay + points + locator + viewer: the .rrd has the pinhole, pictures, cloud and the box."""
+    detections = []
+    test_bus.subscribe("detections", Detection3DArray, lambda key, m: detections.append(m))
+    out = tmp_path / "capture.rrd"
+    viewer = processes.start("viewer", "--save", str(out), "--frames", "1", "--duration-s", "60")
+    processes.start("points")
+    processes.start("locator")
+    processes.start("replay", str(CAPTURE), "--loop")
+    viewer.wait(timeout=90)
+    log = processes.stop(viewer)
+    assert viewer.returncode == 0 and "capture at" in log, log
+    held = contents(out)
+    pinhole = held["/world/camera/image"]
+    assert pinhole["Pinhole:resolution"][0] == [320, 240]
+    assert len(held["/world/camera/image/rgb"]["Image:buffer"][0]) == 320 * 240 * 3
+    assert len(held["/world/camera/image/depth"]["DepthImage:buffer"][0]) == 320 * 240 * 4
+    assert len(held["/world/camera/points"]["Points3D:positions"]) > 70_000
+    # The camera is where tf_static puts it: the capture has no camera/pose.
+    assert held["/world/camera"]["Transform3D:translation"][0] == pytest.approx([0, 0, 0.4])
+    found = next(m for m in detections if m.detections).detections[0].bbox
+    box = held["/world/detections"]
+    p, s = found.center.position, found.size
+    assert box["Boxes3D:centers"][0] == pytest.approx([p.x, p.y, p.z], abs=1e-6)
+    assert np.asarray(box["Boxes3D:half_sizes"][0]) * 2 == pytest.approx([s.x, s.y, s.z], abs=1e-6)
+    # The seed's box: middle (+0.064, +0.040) m, 6 cm tall.
+    assert box["Boxes3D:centers"][0][:2] == pytest.approx([0.064, 0.040], abs=0.002)
+    assert box["Boxes3D:labels"][0].startswith("box ")
+
+
+def test_honcho_start_with_viewer_false_runs_without_a_viewer(tmp_path):
+    """HFOV_DEG=90 VIEWER=false honcho start: everything runs, the viewer idles, the lens is 90°."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    env = {**os.environ, "ONEBOX_ROUTER": endpoint, "HFOV_DEG": "90", "VIEWER": "false"}
+    honcho = subprocess.Popen(
+        [sys.executable, "-m", "honcho", "start"],
+        cwd=ROOT,
+        env={**env, "PYTHONUNBUFFERED": "1"},
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    try:
+        wait_for_output(honcho, "viewer off", timeout_s=60)
+        done = subprocess.run(
+            [sys.executable, "-m", "services.cli", "check", "--window-s", "1.5"],
+            cwd=ROOT,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+    finally:
+        honcho.send_signal(signal.SIGTERM)
+        out, _ = honcho.communicate(timeout=30)
+    assert done.returncode == 0, done.stderr
+    # hfov 90 degrees: fx = 160 / tan(45 degrees) = 160 for the 320-wide camera.
+    assert "camera/camera_info: 320 x 240, fx 160.000  fy 160.000" in done.stdout
+    assert "camera/points" in done.stdout and "detections" in done.stdout
+    assert "viewer.1 stopped" in out, "the idle viewer stayed up until honcho stopped it"
+    assert "Traceback" not in out
