@@ -229,6 +229,17 @@ def test_record_a_running_sim(processes, test_bus, tmp_path):
     assert len(recorded["camera/image_raw"]) == 5
     decode_with_mcap_only(out)
 
+    # Replayed, the recorded clock comes back as it was (nothing synthesised) with the keys asked.
+    again = Inbox()
+    test_bus.subscribe_raw("**", again)
+    replay = processes.start("replay", str(out), "--rate", "0", "--keys", "camera/image_raw")
+    again.wait(has_key("camera/image_raw", 5))
+    processes.stop(replay)
+    replayed = [(k, p) for k, p in again.items]
+    assert [p for k, p in replayed if k == "clock"] == recorded["clock"]
+    assert [p for k, p in replayed if k == "camera/image_raw"] == recorded["camera/image_raw"]
+    assert {k for k, _ in replayed} == {"clock", "camera/image_raw"}
+
 
 def _recovered(path: Path) -> list[Any]:
     """What a reader can get out of a file still being written (empty until it exists)."""
@@ -294,6 +305,22 @@ def test_record_and_snapshot_refuse_to_overwrite(processes, tmp_path):
         assert proc.returncode == 2, out
         assert str(existing) in out and "already exists" in out and "Traceback" not in out
         assert existing.read_bytes() == b"keep me"
+
+
+def test_namespaced_keys_keep_their_prefix_and_their_schema(tmp_path):
+    """A key recorded under a namespace keeps it in the file and still gets its type's schema."""
+    path = tmp_path / "ns.mcap"
+    with RecordingWriter(path, namespace="robot1") as w:
+        w.add("robot1/camera/image_raw", image(7, 1), time.time_ns())
+        w.add("robot1/tf_static", tf_static(), time.time_ns())
+    keys = {k.key: k.schema_name for k in describe(path).keys}
+    assert keys == {
+        "robot1/camera/image_raw": "onebox.sensor.Image",
+        "robot1/tf_static": "onebox.geometry.TFMessage",
+    }
+    capture = read_capture(path, namespace="robot1")
+    assert sorted(capture) == ["camera/image_raw", "tf_static"]
+    assert capture["camera/image_raw"].header.stamp_ns == 7
 
 
 # --- snapshot -----------------------------------------------------------------------------------
@@ -447,7 +474,7 @@ def test_info_lists_keys_counts_and_schemas(spaced_recording):
     text = result.stdout
     assert "Messages:          41" in text
     assert "Duration:          1.000000000 s" in text
-    assert "Simulated time:    0.100 s to 2.000 s" in text
+    assert "Simulated time:    0.000 s to 2.000 s" in text  # tf_static is stamped 0
     assert (
         "Key: camera/image_raw | Type: onebox.sensor.Image | Count: 20 | Encoding: msgpack"
         " | Schema: onebox.sensor.Image (jsonschema)" in " ".join(text.split())
