@@ -87,11 +87,12 @@ def errors_mm(array: Detection3DArray, truth: GroundTruth) -> tuple[float, float
     )
 
 
-def summary(name: str, values: list[float]) -> str:
+def summary(name: str, values: list[float], signed: bool = True) -> str:
     magnitudes = [abs(v) for v in values]
+    bias = f" (mean signed {statistics.fmean(values):+.2f} mm)" if signed else ""
     return (
         f"{name:<10} median {statistics.median(magnitudes):.2f} mm, "
-        f"worst {max(magnitudes):.2f} mm (mean signed {statistics.fmean(values):+.2f} mm)"
+        f"worst {max(magnitudes):.2f} mm{bias}"
     )
 
 
@@ -155,7 +156,7 @@ def main() -> int:
     )
     print(summary("middle x", [r[0] for r in results]))
     print(summary("middle y", [r[1] for r in results]))
-    print(summary("distance", [math.hypot(r[0], r[1]) for r in results]))
+    print(summary("distance", [math.hypot(r[0], r[1]) for r in results], signed=False))
     print(summary("height", [r[2] for r in results]))
     if default is not None:
         print(

@@ -292,7 +292,6 @@ def test_every_bad_input_is_reported_and_the_locator_keeps_measuring(locators, t
 # --- replayed capture ----------------------------------------------------------------------------
 
 
-@pytest.mark.skipif(not CAPTURE.exists(), reason=f"{CAPTURE} is not committed yet")
 def test_replayed_capture_gives_the_seed_detection(locators, processes, test_bus, inbox):
     """onebox replay of the committed capture into a real locator: (+0.064, +0.040), 0.060 m."""
     test_bus.subscribe_raw("detections", inbox)

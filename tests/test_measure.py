@@ -333,11 +333,6 @@ def test_frame_tree_replaces_a_moved_frame():
 
 # --- the committed capture (seed 3.1 to 3.5) -----------------------------------------------------
 
-needs_capture = pytest.mark.skipif(
-    not CAPTURE.exists(), reason=f"{CAPTURE} is not committed yet: record it with onebox snapshot"
-)
-
-
 @pytest.fixture(scope="module")
 def capture():
     return load_capture(CAPTURE)
@@ -360,7 +355,6 @@ def capture_arrays(capture):
     return depth, measure.Intrinsics.from_k(info.k), world_matrix(tf), image.header.frame_id
 
 
-@needs_capture
 def test_capture_holds_the_seed_keys(capture):
     """The capture holds depth, colour, camera info and tf_static, in the optical frame."""
     assert {"camera/camera_info", "camera/depth/image_raw", "camera/image_raw", "tf_static"} <= set(
@@ -373,7 +367,6 @@ def test_capture_holds_the_seed_keys(capture):
     )
 
 
-@needs_capture
 def test_capture_pixel_212_86_and_the_room(capture):
     """Seed 3.2 and 3.3 on the capture: (+0.0644, -0.0411, +0.34), then in the room +0.06 up."""
     depth, lens, matrix, _ = capture_arrays(capture)
@@ -384,7 +377,6 @@ def test_capture_pixel_212_86_and_the_room(capture):
     assert f"{room[0]:+.4f} {room[1]:+.4f} {room[2]:+.4f}" == "+0.0644 +0.0411 +0.0600"
 
 
-@needs_capture
 def test_capture_gives_the_seed_counts_and_answer(capture):
     """Seed 3.5: 76,800 points, 2,582 standing, 2,401 on top; middle (+0.064, +0.040), 0.060 m."""
     depth, lens, matrix, _ = capture_arrays(capture)
