@@ -41,7 +41,7 @@ log = logging.getLogger("bus")
 M = TypeVar("M", bound=Message)
 T = TypeVar("T")
 
-PEER_CONFIG = settings.CONFIG_DIR / "peer.json5"
+CLIENT_CONFIG = settings.CONFIG_DIR / "client.json5"
 ROUTER_CONFIG = settings.CONFIG_DIR / "router.json5"
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 ROUTER_ENV = "ONEBOX_ROUTER"
@@ -71,14 +71,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--config",
         type=Path,
         metavar="FILE",
-        help=f"a Zenoh JSON5 configuration to start from (default {PEER_CONFIG.name} in config/)",
+        help=f"a Zenoh JSON5 configuration to start from (default {CLIENT_CONFIG.name} in config/)",
     )
     settings.add(
         group, "namespace", "", "prefix for every key: robot1 gives robot1/camera/image_raw"
     )
 
 
-def zenoh_config(args: argparse.Namespace, default_file: Path = PEER_CONFIG) -> zenoh.Config:
+def zenoh_config(args: argparse.Namespace, default_file: Path = CLIENT_CONFIG) -> zenoh.Config:
     """The configuration file, then the flags on top of it."""
     path: Path = args.config or default_file
     try:
@@ -306,15 +306,31 @@ class Bus:
 
 
 @contextlib.contextmanager
-def open_bus(args: argparse.Namespace, default_file: Path = PEER_CONFIG) -> Iterator[Bus]:
-    """Open a session from the parsed flags; everything closes when the block ends."""
+def open_bus(
+    args: argparse.Namespace,
+    default_file: Path = CLIENT_CONFIG,
+    connect_timeout_s: float | None = None,
+) -> Iterator[Bus]:
+    """Open a session from the parsed flags; everything closes when the block ends.
+
+    ``connect_timeout_s`` overrides how long a client waits for its router.
+    """
     config = zenoh_config(args, default_file)
+    if connect_timeout_s is not None:
+        config.insert_json5("connect/timeout_ms", str(round(connect_timeout_s * 1000)))
     try:
         session = zenoh.open(config)
     except zenoh.ZError as e:
+        if default_file == ROUTER_CONFIG:
+            where = config.get_json("listen/endpoints")
+            raise BusError(
+                f"cannot listen on {where}: {_reason(e)}. Is another router running there? "
+                "Stop it, or choose another port with --listen (or ONEBOX_ROUTER)"
+            ) from e
+        where = config.get_json("connect/endpoints")
         raise BusError(
-            f"cannot open Zenoh with {args.config or default_file}: {e}. Is something already "
-            "listening on that port? Try --listen tcp/127.0.0.1:0"
+            f"no router at {where}: start it with `honcho start router` or `onebox router` "
+            f"(or point --connect / {ROUTER_ENV} at the one you have)"
         ) from e
     with session:
         bus = Bus(session, getattr(args, "namespace", "") or "")
@@ -322,6 +338,11 @@ def open_bus(args: argparse.Namespace, default_file: Path = PEER_CONFIG) -> Iter
             yield bus
         finally:
             bus.close()
+
+
+def _reason(error: Exception) -> str:
+    """Zenoh's message without the source locations it appends."""
+    return str(error).split(" at /", 1)[0]
 
 
 def routers(bus: Bus) -> list[str]:
