@@ -50,9 +50,10 @@ DETECTIONS = f"{WORLD}/detections"
 GROUND_TRUTH = f"{WORLD}/ground_truth"
 TABLE = f"{WORLD}/table"
 
-BOX_COLOUR = (255, 200, 0)
+BOX_COLOUR = (0, 120, 255)
 TRUTH_COLOUR = (0, 200, 80)
-TABLE_COLOUR = (148, 148, 148)
+TABLE_COLOUR = (205, 205, 200)
+"""Lighter than the table in the pictures, so the cloud's own grey stands out on it."""
 GRID_COLOUR = (90, 90, 90)
 GRID_SPACING_M = 0.05
 POINT_RADIUS_M = 0.001
@@ -78,7 +79,7 @@ def blueprint(camera: str = "camera") -> rrb.Blueprint:
                 # pinhole; camera/points already shows it, in colour.
                 contents=["$origin/**", f"- {cam}/image/depth"],
                 eye_controls=rrb.EyeControls3D(
-                    position=[0.55, -0.55, 0.5], look_target=[0.03, 0.02, 0.05], eye_up=[0, 0, 1]
+                    position=[0.36, -0.5, 0.42], look_target=[0.0, 0.02, 0.13], eye_up=[0, 0, 1]
                 ),
             ),
             rrb.Vertical(
@@ -158,7 +159,7 @@ class SceneLog:
     def start(self) -> None:
         """The static parts: the world's axes and the table."""
         self.rec.log(WORLD, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-        self.rec.log(WORLD, rr.TransformAxes3D(AXIS_LENGTH_M, show_frame=True), static=True)
+        self.rec.log(WORLD, rr.TransformAxes3D(AXIS_LENGTH_M), static=True)
         half = self._table_size_m / 2
         thickness_m = 0.004
         self.rec.log(
@@ -210,10 +211,18 @@ class SceneLog:
         if isinstance(message, Image) and rest == "depth/image_raw":
             self._time(message.header.stamp_ns)
             depth = images.depth_m(message)
+            valid = depth[np.isfinite(depth)]
+            # Colour the readings this picture has, not 0 to the camera's 3 m range.
+            near_far = (float(valid.min()), float(valid.max())) if valid.size else (0.0, 3.0)
             # Rerun reads 0 as "no reading"; onebox's depth pictures use NaN.
             self.rec.log(
                 f"{self._cam}/image/depth",
-                rr.DepthImage(np.nan_to_num(depth, nan=0.0), meter=1.0, colormap="turbo"),
+                rr.DepthImage(
+                    np.nan_to_num(depth, nan=0.0),
+                    meter=1.0,
+                    colormap="viridis",
+                    depth_range=near_far,
+                ),
             )
             return "depth"
         if isinstance(message, CameraInfo) and rest == "camera_info":
@@ -307,7 +316,7 @@ class SceneLog:
                     translation=[tr.translation.x, tr.translation.y, tr.translation.z],
                     quaternion=_quat(tr.rotation),
                 ),
-                rr.TransformAxes3D(AXIS_LENGTH_M, show_frame=True),
+                rr.TransformAxes3D(AXIS_LENGTH_M),
                 static=True,
             )
 
