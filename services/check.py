@@ -19,6 +19,7 @@ that does not decode as its key's type is listed as such and never stops the rep
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import os
 import threading
@@ -31,7 +32,7 @@ import msgspec
 from schemas import CameraInfo, Detection3DArray, Image, Message, PointCloud, codec, type_for_key
 from schemas import type_name as schema_type_name
 from services import bus
-from services.errors import NothingArrived
+from services.errors import BusError, NothingArrived
 
 log = logging.getLogger("check")
 
@@ -239,11 +240,20 @@ def report(seen: dict[str, Seen], b: bus.Bus, window_s: float) -> list[str]:
 
 def main(args: argparse.Namespace) -> int:
     listener = Listener()
-    with bus.open_bus(args) as b:
-        default = os.environ.get(bus.ROUTER_ENV) or bus.DEFAULT_ENDPOINT
-        endpoints = ", ".join(args.connect or [default])
-        if not wait_for_router(b, min(ROUTER_WAIT_S, args.window_s)):
-            raise NothingArrived(f"nothing is running: no router at {endpoints}. {START_HINT}")
+    default = os.environ.get(bus.ROUTER_ENV) or bus.DEFAULT_ENDPOINT
+    endpoints = ", ".join(args.connect or [default])
+    wait_s = min(ROUTER_WAIT_S, args.window_s)
+    nothing = f"nothing is running: no router at {endpoints}. {START_HINT}"
+    with contextlib.ExitStack() as stack:
+        try:
+            b = stack.enter_context(bus.open_bus(args, connect_timeout_s=wait_s))
+        except BusError as e:
+            raise NothingArrived(
+                f"nothing is running: no router at {endpoints}. {START_HINT}"
+            ) from e
+        # A peer configuration (--config) opens without a router; ask it directly.
+        if not wait_for_router(b, wait_s):
+            raise NothingArrived(nothing)
         b.subscribe_raw("**", listener.on_sample)
         b.subscribe_raw("tf_static", listener.on_latched, history=True)
         log.info("listening on %s for %g s", b.key("**"), args.window_s)

@@ -182,7 +182,7 @@ def wait_for_capture(b: bus.Bus, camera: str, timeout_s: float) -> Capture:
 def main(args: argparse.Namespace) -> int:
     rows = (int(args.rows[0]), int(args.rows[1]))
     cols = (int(args.cols[0]), int(args.cols[1]))
-    with bus.open_bus(args) as b:
+    with bus.open_bus(args, connect_timeout_s=args.timeout_s) as b:
         capture = wait_for_capture(b, args.camera, args.timeout_s)
     height, width = capture.depth_m.shape
     check_patch(capture.depth_m.shape, rows, cols)
