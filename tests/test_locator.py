@@ -135,11 +135,23 @@ class Camera:
         self.depth.publish(depth or depth_image(self.picture, self.stamp_ns))
         return self.stamp_ns
 
-    def until_measured(self, inbox: Inbox, timeout_s: float = 20.0) -> Detection3DArray:
+    def depth_16uc1(self, stamp_ns: int) -> Image:
+        """The picture as a real camera sends it: millimetres, 0 where there is no reading."""
+        mm = np.round(self.picture * 1000).astype("<u2")
+        mm[:4] = 0
+        image = depth_image(self.picture, stamp_ns)
+        return msgspec.structs.replace(
+            image, encoding="16UC1", step=image.width * 2, data=mm.tobytes()
+        )
+
+    def until_measured(
+        self, inbox: Inbox, timeout_s: float = 20.0, millimetres: bool = False
+    ) -> Detection3DArray:
         """Publish captures until one comes back measured (the locator may still be joining)."""
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
-            stamp = self.capture()
+            next_ns = self.stamp_ns + SECOND_NS // 5
+            stamp = self.capture(depth=self.depth_16uc1(next_ns) if millimetres else None)
 
             def measured(items: list[tuple[str, bytes]], stamp: int = stamp) -> bool:
                 return any(d.header.stamp_ns == stamp for d in decode_detections(items))
@@ -196,13 +208,15 @@ def test_matcher_with_slop_pairs_the_nearest():
 
 
 def test_synthetic_capture_is_detected_and_logged(locators, test_bus, inbox):
-    """Depth + info + tf_static give a detection at the box and the seed-style line."""
+    """Depth + info + tf_static give a detection at the box and the seed-style line; so does
+    a 16UC1 picture in millimetres with holes of 0."""
     test_bus.subscribe_raw("detections", inbox)
     camera = Camera(test_bus)
     camera.publish_tf()
     output = locators()
     assert_default_box(camera.until_measured(inbox))
     output.wait_for(r"box: middle \(\+0\.064, \+0\.040\) m, height 0\.060 m, from 2,352 points")
+    assert_default_box(camera.until_measured(inbox, millimetres=True))
     assert "Traceback" not in output.stop()
 
 
@@ -255,6 +269,11 @@ def test_every_bad_input_is_reported_and_the_locator_keeps_measuring(locators, t
             )
             return msgspec.structs.replace(good, header=header, **changes)
 
+        def small_lens() -> None:
+            """A depth picture whose camera info, same stamp, is for another size."""
+            camera.capture(depth=bad(), info=False)
+            camera.info.publish(camera_info(Scene(width=160, height=120), camera.stamp_ns))
+
         cases: list[tuple[str, object]] = [
             ("not a onebox.sensor.Image", lambda: raw_depth.put(b"\x00garbage\xff")),
             (
@@ -272,6 +291,7 @@ def test_every_bad_input_is_reported_and_the_locator_keeps_measuring(locators, t
             ),
             ("no transform from 'elsewhere'", lambda: camera.capture(depth=bad("elsewhere"))),
             ("no camera/camera_info with that stamp", lambda: camera.capture(info=False)),
+            ("camera info is for 160 x 120", small_lens),
             ("stamp went back", lambda: camera.depth.publish(depth_image(camera.picture, 1))),
         ]
         for line, send in cases:
