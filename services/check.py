@@ -183,7 +183,7 @@ def wait_for_router(b: bus.Bus, timeout_s: float) -> bool:
 
 
 START_HINT = (
-    "start everything with `honcho start` (or `onebox router` and `onebox sim`), "
+    "Start everything with `honcho start` (or `onebox router` and `onebox sim`), "
     "or replay a recording with `onebox replay tests/data/one_box.mcap`"
 )
 
