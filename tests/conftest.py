@@ -73,9 +73,9 @@ class Processes:
         return out or ""
 
     def stop_all(self) -> None:
+        """Stop every process still running, and close the pipes of those that ended."""
         for proc in reversed(self.started):
-            if proc.poll() is None:
-                self.stop(proc)
+            self.stop(proc)
 
 
 def _run_router() -> Iterator[str]:
