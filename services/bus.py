@@ -65,7 +65,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "-l",
         action="append",
         metavar="ENDPOINT",
-        help="endpoint to listen on, repeatable (default tcp/127.0.0.1:0, any free port)",
+        help="endpoint to listen on, repeatable: the router's (default $ONEBOX_ROUTER or "
+        f"{DEFAULT_ENDPOINT}); other processes are clients of the router and need none",
     )
     group.add_argument(
         "--config",
