@@ -4,10 +4,10 @@
 
 Starts a private ``onebox router`` and one real ``onebox locator``, then for each of ``--boxes``
 random boxes (edge 3 to 10 cm, anywhere the whole box stays in the 320 x 240 camera's view,
-turned when ``--random-yaw``) runs ``onebox sim --fast --frames 3`` with that box and pairs each
-detection with the sim's ground truth of the same stamp. Prints the median and the worst error
-of the middle (x, y and the distance) and of the height, in millimetres, and the default
-scene's error on its own line.
+turned when ``--random-yaw``) runs ``onebox sim --rate-hz 30 --frames 4`` with that box and
+pairs each detection with the sim's ground truth of the same stamp. Prints the median and the
+worst error of the middle (x, y and the distance) and of the height, in millimetres, and the
+default scene's error on its own line.
 """
 
 from __future__ import annotations
@@ -126,9 +126,7 @@ def main() -> int:
                 pairs.reset()
                 sim = procs.start(
                     "sim",
-                    "--fast",
-                    "--frames",
-                    "3",
+                    *("--rate-hz", "30", "--frames", "4"),
                     *("--box-x", f"{x:.5f}", "--box-y", f"{y:.5f}"),
                     *("--box-size", f"{size:.5f}", "--box-yaw-deg", f"{yaw:.3f}"),
                 )
@@ -138,6 +136,11 @@ def main() -> int:
                 found = [e for e in (errors_mm(d, t) for d, t in pairs.paired()) if e]
                 if not found:
                     missed += 1
+                    why = "no box in its detections" if pairs.paired() else "no detection came"
+                    print(
+                        f"  missed box {n}: ({x:+.4f}, {y:+.4f}), {size * 100:.1f} cm, "
+                        f"yaw {yaw:.0f} deg: {why}; sim said: {procs.stop(sim).strip()[-300:]}"
+                    )
                     continue
                 if n == 0:
                     default = found[-1]
