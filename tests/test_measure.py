@@ -333,6 +333,7 @@ def test_frame_tree_replaces_a_moved_frame():
 
 # --- the committed capture (seed 3.1 to 3.5) -----------------------------------------------------
 
+
 @pytest.fixture(scope="module")
 def capture():
     return load_capture(CAPTURE)
