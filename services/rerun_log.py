@@ -256,7 +256,7 @@ class SceneLog:
 
     def _camera_info(self, info: CameraInfo) -> None:
         if len(info.k) != 9:
-            raise images.ImageError(f"camera info k has {len(info.k)} numbers, not 9")
+            raise images.ImageError(f"camera info k has {len(info.k)} numbers, not 9", "lens")
         # The lens rarely changes: log it again only when it does, not five times a second.
         if info == self._last_info or (
             self._last_info is not None

@@ -117,6 +117,13 @@ def processes(router: str) -> Iterator[Processes]:
     procs.stop_all()
 
 
+def honcho_env(**extra: str) -> dict[str, str]:
+    """The environment for a ``honcho start`` test: the Procfile's ``onebox`` found beside this
+    interpreter (as in an activated venv), unbuffered output, plus ``extra``."""
+    path = f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"
+    return {**os.environ, "PYTHONUNBUFFERED": "1", "PATH": path, **extra}
+
+
 def bus_args(endpoint: str, namespace: str = "") -> argparse.Namespace:
     """The parsed Zenoh flags of a process connected to ``endpoint``."""
     return argparse.Namespace(connect=[endpoint], listen=None, config=None, namespace=namespace)

@@ -3,12 +3,10 @@
 from __future__ import annotations
 
 import math
-import os
 import signal
 import subprocess
 import sys
 from collections.abc import Iterator
-from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
@@ -26,7 +24,7 @@ from schemas import (
     codec,
 )
 from services import bus
-from tests.conftest import ROOT, Inbox, Processes, bus_args, free_port, has_key
+from tests.conftest import ROOT, Inbox, Processes, bus_args, free_port, has_key, honcho_env
 
 SEED_PATCH = "\n".join(["0.400 0.400 0.400 0.373 0.340 0.340 0.340 0.340"] * 5)
 """The seed's section 5.2: basic camera rows 19-23, columns 43-50, metres to three decimals."""
@@ -280,9 +278,7 @@ def test_bad_setting_is_one_line(router: str) -> None:
 def test_honcho_starts_router_and_sim() -> None:
     """``honcho start router sim`` on a private port publishes the clock and stops on SIGTERM."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    # The Procfile runs `onebox`: find it beside this interpreter, as an activated venv would.
-    path = f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"
-    env = {**os.environ, "ONEBOX_ROUTER": endpoint, "PYTHONUNBUFFERED": "1", "PATH": path}
+    env = honcho_env(ONEBOX_ROUTER=endpoint)
     honcho = subprocess.Popen(
         [sys.executable, "-m", "honcho", "start", "router", "sim"],
         cwd=ROOT,

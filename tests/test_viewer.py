@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
 import sys
@@ -14,7 +13,7 @@ import rerun as rr
 
 from schemas import Detection3DArray, Image, TFMessage, codec, type_for_key
 from services import rerun_log
-from tests.conftest import CAPTURE, ROOT, free_port
+from tests.conftest import CAPTURE, ROOT, free_port, honcho_env
 from tests.fake_capture import BOX_CENTRE, BOX_SIZE, capture, tf_static, write_mcap
 from tests.rrd import contents, wait_for_output
 
@@ -250,11 +249,11 @@ def test_viewer_fed_a_replay_of_the_committed_capture(processes, test_bus, tmp_p
 def test_honcho_start_with_viewer_false_runs_without_a_viewer(tmp_path):
     """HFOV_DEG=90 VIEWER=false honcho start: everything runs, the viewer idles, the lens is 90°."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    env = {**os.environ, "ONEBOX_ROUTER": endpoint, "HFOV_DEG": "90", "VIEWER": "false"}
+    env = honcho_env(ONEBOX_ROUTER=endpoint, HFOV_DEG="90", VIEWER="false")
     honcho = subprocess.Popen(
         [sys.executable, "-m", "honcho", "start"],
         cwd=ROOT,
-        env={**env, "PYTHONUNBUFFERED": "1"},
+        env=env,
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
