@@ -183,6 +183,10 @@ def main(args: argparse.Namespace) -> int:
             args.rate_hz,
             ", as fast as possible" if args.fast else "",
         )
+        # A new session learns of the subscribers already there a moment after it opens; wait
+        # for that (at most a second) so that the first capture reaches them too.
+        if not pubs[0].depth.wait_for_subscribers(timeout_s=1.0):
+            log.info("no subscriber yet; publishing anyway")
         gui = _open_gui(model, data, args.gui)
         start = time.monotonic()
         count = 0
