@@ -149,6 +149,8 @@ def rerun_executable() -> str:
 
 def _port_free(port: int) -> bool:
     with socket.socket() as s:
+        # As the server will: a port whose last connections linger in TIME_WAIT is free.
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             s.bind(("127.0.0.1", port))
         except OSError:
