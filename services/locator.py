@@ -52,7 +52,7 @@ from schemas import (
     TransformStamped,
     Vector3,
 )
-from services import bus, measure, settings
+from services import bus, images, measure, settings
 from services.errors import SettingError
 from services.frames import FrameError, FrameTree, matrix_of
 
@@ -339,14 +339,7 @@ class Locator:
 
     def _on_depth(self, key: str, image: Image) -> None:
         try:
-            depth_m = measure.depth_metres(
-                image.data,
-                width=image.width,
-                height=image.height,
-                step=image.step,
-                encoding=image.encoding,
-                is_bigendian=image.is_bigendian,
-            )
+            depth_m = images.depth_m(image)
         except measure.ImageError as e:
             self._report.warn(key, e.kind, f"dropped: {e}")
             return

@@ -26,7 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from schemas import FLOAT32, UINT32, CameraInfo, Header, Image, PointCloud, PointField
-from services import bus, measure
+from services import bus, images, measure
 from services.errors import SettingError
 from services.locator import StampClock, Stamped, StampMatcher
 
@@ -125,14 +125,7 @@ class Points:
 
     def _on_depth(self, key: str, image: Image) -> None:
         try:
-            depth_m = measure.depth_metres(
-                image.data,
-                width=image.width,
-                height=image.height,
-                step=image.step,
-                encoding=image.encoding,
-                is_bigendian=image.is_bigendian,
-            )
+            depth_m = images.depth_m(image)
         except measure.ImageError as e:
             self._report.warn(key, e.kind, f"dropped: {e}")
             return
@@ -140,13 +133,7 @@ class Points:
 
     def _on_colour(self, key: str, image: Image) -> None:
         try:
-            rgb = measure.colour_rgb(
-                image.data,
-                width=image.width,
-                height=image.height,
-                step=image.step,
-                encoding=image.encoding,
-            )
+            rgb = images.rgb(image)
         except measure.ImageError as e:
             self._report.warn(key, e.kind, f"dropped: {e}")
             return
