@@ -222,6 +222,23 @@ class StampClock:
             self._last[key] = stamp_ns
         return last if last is not None and stamp_ns < last else None
 
+    def accept(
+        self, key: str, stamp_ns: int, report: bus.ReportLimiter, matcher: StampMatcher
+    ) -> bool:
+        """True if ``stamp_ns`` does not go back on ``key``; otherwise report it, forget the
+        half-made matches (they belong to the old time) and return False."""
+        previous = self.went_back(key, stamp_ns)
+        if previous is None:
+            return True
+        report.warn(
+            key,
+            "stamp",
+            f"stamp went back from {previous:,} ns to {stamp_ns:,} ns, dropped; carrying on "
+            "from the new time (was the sim or a replay restarted?)",
+        )
+        matcher.clear()
+        return False
+
 
 # --- the locator ---------------------------------------------------------------------------------
 
@@ -325,17 +342,7 @@ class Locator:
     # Zenoh callbacks: decode and check, then hand over; nothing slow here.
 
     def _stamp_ok(self, key: str, stamp_ns: int) -> bool:
-        previous = self._clock.went_back(key, stamp_ns)
-        if previous is None:
-            return True
-        self._report.warn(
-            key,
-            "stamp",
-            f"stamp went back from {previous:,} ns to {stamp_ns:,} ns, dropped; carrying on "
-            "from the new time (was the sim or a replay restarted?)",
-        )
-        self._matcher.clear()
-        return False
+        return self._clock.accept(key, stamp_ns, self._report, self._matcher)
 
     def _on_depth(self, key: str, image: Image) -> None:
         try:

@@ -109,15 +109,7 @@ class Points:
         self._bus.subscribe(INFO_KEY, CameraInfo, self._on_info)
 
     def _offer(self, key: str, stream: str, stamp_ns: int, item: object) -> None:
-        previous = self._clock.went_back(key, stamp_ns)
-        if previous is not None:
-            self._report.warn(
-                key,
-                "stamp",
-                f"stamp went back from {previous:,} ns to {stamp_ns:,} ns, dropped; carrying on "
-                "from the new time",
-            )
-            self._matcher.clear()
+        if not self._clock.accept(key, stamp_ns, self._report, self._matcher):
             return
         matched = self._matcher.add(stream, stamp_ns, item)
         if matched is not None:
