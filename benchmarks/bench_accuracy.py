@@ -23,9 +23,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from onebox import bus
+from onebox.testing.processes import Processes, bus_args, free_port
 from schemas import Detection3DArray, GroundTruth, codec
-from services import bus
-from tests.conftest import Processes, bus_args, free_port
 
 HALF_VIEW_X_M = 0.40 * math.tan(math.radians(30)) * (0.40 - 0.10) / 0.40  # at the highest top
 HALF_VIEW_Y_M = HALF_VIEW_X_M * 240 / 320

@@ -27,11 +27,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from onebox import bus
+from onebox.recording import stamp_ns as stamp_of
+from onebox.testing.processes import Processes, bus_args, free_port
+from onebox.testing.synthetic import Scene, camera_info, depth_image, depth_picture, tf_static
 from schemas import CameraInfo, Detection3DArray, Image, TFMessage, codec
-from services import bus
-from services.recording import stamp_ns as stamp_of
-from tests.conftest import Processes, bus_args, free_port
-from tests.synthetic import Scene, camera_info, depth_image, depth_picture, tf_static
 
 
 class Clock:

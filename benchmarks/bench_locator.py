@@ -9,7 +9,7 @@ pixel) it times, in the same run and interleaved so both see the same machine lo
 - reference: the seed's section 3.4 and 3.5 as written: every pixel's middle from
   ``np.mgrid + 0.5``, x, y, z for all of them, all moved into the world with the 4 x 4 matrix,
   then standing, top and middle;
-- locator: ``measure.depth_metres`` + ``measure.locate_box``, what ``onebox locator`` runs per
+- locator: ``pictures.depth_metres`` + ``seed.locate_box``, what ``onebox locator`` runs per
   picture (the per-lens limit grid cached, as in the running locator).
 
 Both start from the message's bytes. It prints the median milliseconds of each, the ratio, and
@@ -28,8 +28,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import numpy as np
 
-from services import measure
-from tests.synthetic import Scene, depth_picture
+from onebox import geometry, pictures
+from onebox.perception import seed
+from onebox.testing.synthetic import Scene, depth_picture
 
 SIZES = [(320, 240), (640, 480), (1280, 720)]
 
@@ -53,10 +54,12 @@ def reference(
 
 
 def locator(
-    data: bytes, width: int, height: int, lens: measure.Intrinsics, camera_to_world: np.ndarray
-) -> measure.BoxMeasurement | None:
-    depth = measure.depth_metres(data, width=width, height=height, step=width * 4, encoding="32FC1")
-    return measure.locate_box(depth, lens, camera_to_world)
+    data: bytes, width: int, height: int, lens: geometry.Intrinsics, camera_to_world: np.ndarray
+) -> seed.BoxMeasurement | None:
+    depth = pictures.depth_metres(
+        data, width=width, height=height, step=width * 4, encoding="32FC1"
+    )
+    return seed.locate_box(depth, lens, camera_to_world)
 
 
 def main() -> int:
@@ -67,7 +70,7 @@ def main() -> int:
     for width, height in SIZES:
         scene = Scene(width=width, height=height)
         data = depth_picture(scene).tobytes()
-        lens = measure.Intrinsics.from_k(scene.k)
+        lens = geometry.Intrinsics.from_k(scene.k)
         matrix = scene.camera_to_world()
         ref = reference(data, width, height, scene.k, matrix)
         box = locator(data, width, height, lens, matrix)

@@ -29,10 +29,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from onebox import bus  # noqa: E402
+from onebox.recording import RecordingWriter, iter_messages  # noqa: E402
+from onebox.testing.processes import bus_args, free_port  # noqa: E402
 from schemas import Header, Image, codec  # noqa: E402
-from services import bus  # noqa: E402
-from services.recording import RecordingWriter, iter_messages  # noqa: E402
-from tests.conftest import bus_args, free_port  # noqa: E402
 
 CAMERA_KEYS = ("camera/image_raw", "camera/depth/image_raw")
 WIDTH, HEIGHT = 640, 480

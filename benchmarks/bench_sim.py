@@ -24,11 +24,11 @@ os.environ.setdefault("MUJOCO_GL", "egl")  # before mujoco loads
 import mujoco
 import numpy as np
 
+from onebox import bus, pictures
+from onebox.testing.processes import Inbox, bus_args, free_port
+from onebox.world import scene
+from onebox.world.render import SceneRenderer
 from schemas import Header, Image, codec
-from services import bus, scene
-from services.render import SceneRenderer
-from services.sim import image_messages
-from tests.conftest import Inbox, bus_args, free_port
 
 
 def stock(settings: scene.SceneSettings, captures: int, shadows: bool) -> float:
@@ -78,7 +78,9 @@ def ours(settings: scene.SceneSettings, captures: int, endpoint: str) -> dict[st
             t1 = time.perf_counter()
             capture = renderer.read(cam.name)
             t2 = time.perf_counter()
-            colour, depth = image_messages(cam, capture, Header(stamp_ns=i))
+            header = Header(stamp_ns=i)
+            colour = pictures.rgb8_image(capture.rgb, header)
+            depth = pictures.depth_image(capture.depth_m, header)
             colour_bytes, depth_bytes = encoder.encode(colour), encoder.encode(depth)
             t3 = time.perf_counter()
             colour_pub.publish_bytes(colour_bytes)

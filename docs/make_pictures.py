@@ -38,9 +38,10 @@ import numpy.typing as npt
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from onebox import pictures  # noqa: E402
+from onebox.recording import read_capture  # noqa: E402
 from schemas import Image  # noqa: E402  (after the path, so it runs from a checkout)
-from services import images, pixels  # noqa: E402
-from services.recording import read_capture  # noqa: E402
+from services import pixels  # noqa: E402
 
 CAPTURE = ROOT / "tests" / "data" / "one_box.mcap"
 DOCS = ROOT / "docs"
@@ -64,12 +65,12 @@ def write_png(path: Path, rgb: npt.NDArray[np.uint8]) -> None:
     )
 
 
-def pictures(out_dir: Path, scale: int = 2) -> None:
+def capture_pictures(out_dir: Path, scale: int = 2) -> None:
     capture = read_capture(CAPTURE)
     colour, depth = capture["camera/image_raw"], capture["camera/depth/image_raw"]
     assert isinstance(colour, Image) and isinstance(depth, Image)
-    rgb = images.rgb(colour)
-    grey = pixels.depth_grey(images.depth_m(depth))
+    rgb = pictures.rgb(colour)
+    grey = pixels.depth_grey(pictures.depth_m(depth))
     for name, picture in (("colour.png", rgb), ("depth.png", grey)):
         big = picture.repeat(scale, axis=0).repeat(scale, axis=1)
         write_png(out_dir / name, big)
@@ -181,7 +182,7 @@ def main() -> int:
     parser.add_argument("--out", type=Path, default=DOCS, help="where to write (docs/)")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
-    pictures(args.out)
+    capture_pictures(args.out)
     if not args.no_scene:
         scene(args.out / "scene.png", args.wait_s)
     return 0

@@ -1,7 +1,5 @@
-"""onebox's processes and tools, one module each; ``onebox --help`` lists them."""
+"""onebox's commands, one module each: the Procfile's processes and the tools.
 
-import os
-
-# Render headless unless told otherwise. MuJoCo reads this when it is first imported, so it is
-# set here, before any service can import mujoco.
-os.environ.setdefault("MUJOCO_GL", "egl")
+``onebox --help`` lists them. A command parses its flags, builds its settings and calls into the
+``onebox`` library; no command imports another.
+"""

@@ -29,10 +29,10 @@ from typing import Any
 
 import msgspec
 
+from onebox import bus
+from onebox.errors import BusError, NothingArrived
 from schemas import CameraInfo, Detection3DArray, Image, Message, PointCloud, codec, type_for_key
 from schemas import type_name as schema_type_name
-from services import bus
-from services.errors import BusError, NothingArrived
 
 log = logging.getLogger("check")
 

@@ -11,7 +11,7 @@ import logging
 import os
 import sys
 
-from services.errors import OneboxError
+from onebox.errors import OneboxError
 
 # name: (module, one line). Modules are imported only when their command runs, so that
 # ``onebox --help`` does not load MuJoCo or Rerun.
@@ -21,7 +21,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "locator": ("services.locator", "find the box in each depth picture; publish detections"),
     "points": ("services.points", "turn depth and colour into camera/points"),
     "viewer": ("services.viewer", "show everything live in Rerun (the seed's RViz)"),
-    "view": ("services.viewer_file", "show an .mcap recording in Rerun, or write an .rrd"),
+    "view": ("services.view", "show an .mcap recording in Rerun, or write an .rrd"),
     "record": ("services.record", "record keys into an .mcap file (ros2 bag record)"),
     "snapshot": ("services.snapshot", "record one capture into an .mcap file and exit"),
     "replay": ("services.replay", "publish an .mcap recording back onto its keys (ros2 bag play)"),
@@ -69,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
         format="%(levelname)s [%(name)s] %(message)s",
     )
     logging.getLogger("OpenGL").setLevel(logging.WARNING)  # PyOpenGL chatters at INFO on import
-    from services.bus import install_signal_handlers
+    from onebox.bus import install_signal_handlers
 
     install_signal_handlers()
     try:

@@ -15,7 +15,7 @@ import argparse
 import datetime
 from pathlib import Path
 
-from services.recording import RecordingInfo, describe
+from onebox.recording import RecordingInfo, describe
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -29,16 +29,19 @@ Settings (flag > environment variable > config/onebox.toml > default) are listed
 from __future__ import annotations
 
 import argparse
-import collections
 import logging
 import threading
 import time
-from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from onebox import bus, geometry, pictures, settings, sync
+from onebox.errors import SettingError
+from onebox.geometry import FrameError, FrameTree, matrix_of
+from onebox.perception import seed
+from onebox.sync import StampClock, Stamped, StampMatcher
 from schemas import (
     BoundingBox3D,
     CameraInfo,
@@ -52,9 +55,6 @@ from schemas import (
     TransformStamped,
     Vector3,
 )
-from services import bus, images, measure, settings
-from services.errors import SettingError
-from services.frames import FrameError, FrameTree, matrix_of
 
 log = logging.getLogger("locator")
 
@@ -112,134 +112,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     run.add_argument("--duration-s", type=float, metavar="S", help="stop after S seconds")
 
 
-# --- matching messages by stamp ------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Stamped:
-    """One decoded message waiting for its partners."""
-
-    stamp_ns: int
-    item: Any
-    arrived_s: float
-
-
-class StampMatcher:
-    """Pairs messages of several streams taken at the same moment (message_filters' job).
-
-    The first stream leads: each of its messages is matched with the message of every other
-    stream whose stamp is nearest, if no further than ``slop_ns`` (0: equal stamps only).
-    Each stream keeps at most ``queue_size`` messages, dropping its oldest; a lead message
-    dropped unmatched is handed to ``on_unmatched``.
-    """
-
-    def __init__(
-        self,
-        streams: Sequence[str],
-        *,
-        slop_ns: int = 0,
-        queue_size: int = 4,
-        on_unmatched: Callable[[Stamped, str], None] | None = None,
-    ) -> None:
-        self.streams = tuple(streams)
-        self.exact = slop_ns == 0
-        self._slop_ns = slop_ns
-        self._queues: dict[str, collections.deque[Stamped]] = {
-            s: collections.deque(maxlen=queue_size) for s in self.streams
-        }
-        self._on_unmatched = on_unmatched
-        self._lock = threading.Lock()
-
-    def add(self, stream: str, stamp_ns: int, item: Any) -> dict[str, Stamped] | None:
-        """Keep ``item``; return a complete set (one Stamped per stream) once one exists."""
-        lost: list[Stamped] = []
-        with self._lock:
-            queue = self._queues[stream]
-            if stream == self.streams[0] and len(queue) == queue.maxlen:
-                lost.append(queue[0])
-            queue.append(Stamped(stamp_ns, item, time.monotonic()))
-            matched = self._match(lost)
-        for stamped in lost:
-            self._unmatched(stamped, "a newer capture came first")
-        return matched
-
-    def _match(self, lost: list[Stamped]) -> dict[str, Stamped] | None:
-        lead = self._queues[self.streams[0]]
-        for lead_item in reversed(lead):  # the newest first: it wins
-            found = {self.streams[0]: lead_item}
-            for stream in self.streams[1:]:
-                queue = self._queues[stream]
-                if not queue:
-                    break
-                nearest = min(queue, key=lambda s: abs(s.stamp_ns - lead_item.stamp_ns))
-                if abs(nearest.stamp_ns - lead_item.stamp_ns) > self._slop_ns:
-                    break
-                found[stream] = nearest
-            else:
-                for stream, used in found.items():
-                    queue = self._queues[stream]
-                    while queue and queue[0].stamp_ns <= used.stamp_ns:
-                        dropped = queue.popleft()
-                        if stream == self.streams[0] and dropped is not used:
-                            lost.append(dropped)
-                return found
-        return None
-
-    def expire(self, max_age_s: float) -> None:
-        """Report and drop lead messages that waited more than ``max_age_s`` for partners."""
-        now = time.monotonic()
-        lost: list[Stamped] = []
-        with self._lock:
-            lead = self._queues[self.streams[0]]
-            while lead and now - lead[0].arrived_s > max_age_s:
-                lost.append(lead.popleft())
-        for stamped in lost:
-            self._unmatched(stamped, f"nothing matched it within {max_age_s:g} s")
-
-    def clear(self) -> None:
-        """Forget everything waiting (time went back: nothing old can match the new)."""
-        with self._lock:
-            for queue in self._queues.values():
-                queue.clear()
-
-    def _unmatched(self, stamped: Stamped, why: str) -> None:
-        if self._on_unmatched is not None:
-            self._on_unmatched(stamped, why)
-
-
-class StampClock:
-    """Notices a key's stamps going back; the message that went back is dropped and reported,
-    and the key carries on from its new time (a restarted sim, a replay started again)."""
-
-    def __init__(self) -> None:
-        self._last: dict[str, int] = {}
-        self._lock = threading.Lock()
-
-    def went_back(self, key: str, stamp_ns: int) -> int | None:
-        """The previous stamp on ``key`` if ``stamp_ns`` is older than it, else None."""
-        with self._lock:
-            last = self._last.get(key)
-            self._last[key] = stamp_ns
-        return last if last is not None and stamp_ns < last else None
-
-    def accept(
-        self, key: str, stamp_ns: int, report: bus.ReportLimiter, matcher: StampMatcher
-    ) -> bool:
-        """True if ``stamp_ns`` does not go back on ``key``; otherwise report it, forget the
-        half-made matches (they belong to the old time) and return False."""
-        previous = self.went_back(key, stamp_ns)
-        if previous is None:
-            return True
-        report.warn(
-            key,
-            "stamp",
-            f"stamp went back from {previous:,} ns to {stamp_ns:,} ns, dropped; carrying on "
-            "from the new time (was the sim or a replay restarted?)",
-        )
-        matcher.clear()
-        return False
-
-
 # --- the locator ---------------------------------------------------------------------------------
 
 
@@ -249,7 +121,7 @@ class DepthFrame:
 
     stamp_ns: int
     frame_id: str
-    depth_m: measure.Float32Array
+    depth_m: geometry.Float32Array
     arrived_s: float
 
 
@@ -259,7 +131,7 @@ class Lens:
 
     width: int
     height: int
-    intrinsics: measure.Intrinsics
+    intrinsics: geometry.Intrinsics
 
 
 @dataclass(frozen=True)
@@ -267,11 +139,11 @@ class Result:
     """The outcome of one picture, kept for the log every few seconds."""
 
     stamp_ns: int
-    box: measure.BoxMeasurement | None
+    box: seed.BoxMeasurement | None
 
 
 def detection_array(
-    box: measure.BoxMeasurement | None, stamp_ns: int, world_frame: str, table_z: float
+    box: seed.BoxMeasurement | None, stamp_ns: int, world_frame: str, table_z: float
 ) -> Detection3DArray:
     """The message for one picture: one box, or none."""
     header = Header(stamp_ns=stamp_ns, frame_id=world_frame)
@@ -292,7 +164,7 @@ def detection_array(
     )
 
 
-def box_line(box: measure.BoxMeasurement) -> str:
+def box_line(box: seed.BoxMeasurement) -> str:
     """The seed's log line."""
     return (
         f"box: middle ({box.x:+.3f}, {box.y:+.3f}) m, height {box.height:.3f} m, "
@@ -315,7 +187,7 @@ class Locator:
             "pose": b.key(POSE_KEY),
             "tf": b.key(TF_KEY),
         }
-        self._report = bus.ReportLimiter(log, interval_s=args.log_interval_s)
+        self._report = sync.ReportLimiter(log, interval_s=args.log_interval_s)
         streams = ["depth", "info", "pose"] if self._use_pose else ["depth", "info"]
         self._matcher = StampMatcher(
             streams,
@@ -323,11 +195,11 @@ class Locator:
             queue_size=args.queue_size,
             on_unmatched=self._unmatched,
         )
-        self._matched: bus.NewestQueue[dict[str, Stamped]] = bus.NewestQueue(maxlen=2)
+        self._matched: sync.NewestQueue[dict[str, Stamped]] = sync.NewestQueue(maxlen=2)
         self._clock = StampClock()
         self._tree = FrameTree()
         self._tree_lock = threading.Lock()
-        self._camera_cache: tuple[int, str, measure.Float64Array] | None = None
+        self._camera_cache: tuple[int, str, geometry.Float64Array] | None = None
         self._publisher = b.publisher(DETECTIONS_KEY, Detection3DArray)
         self.published = 0
         self.latest: Result | None = None
@@ -346,8 +218,8 @@ class Locator:
 
     def _on_depth(self, key: str, image: Image) -> None:
         try:
-            depth_m = images.depth_m(image)
-        except measure.ImageError as e:
+            depth_m = pictures.depth_m(image)
+        except pictures.ImageError as e:
             self._report.warn(key, e.kind, f"dropped: {e}")
             return
         stamp_ns = image.header.stamp_ns
@@ -358,7 +230,7 @@ class Locator:
 
     def _on_info(self, key: str, info: CameraInfo) -> None:
         try:
-            lens = Lens(info.width, info.height, measure.Intrinsics.from_k(info.k))
+            lens = Lens(info.width, info.height, geometry.Intrinsics.from_k(info.k))
         except ValueError as e:
             self._report.warn(key, "lens", f"dropped: {e}")
             return
@@ -447,10 +319,10 @@ class Locator:
                 f"dropped: {e}",
             )
             return
-        box = measure.locate_box(
+        box = seed.locate_box(
             frame.depth_m, lens.intrinsics, camera_to_world, self._table_z, self._min_height
         )
-        if box is None and not measure.has_reading(frame.depth_m):
+        if box is None and not seed.has_reading(frame.depth_m):
             self._report.warn(
                 depth_key,
                 "no-reading",

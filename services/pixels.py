@@ -30,9 +30,9 @@ from typing import NamedTuple
 import numpy as np
 import numpy.typing as npt
 
+from onebox import bus, pictures
+from onebox.errors import NothingArrived, SettingError
 from schemas import Image
-from services import bus, images
-from services.errors import NothingArrived, SettingError
 
 log = logging.getLogger("pixels")
 
@@ -151,25 +151,23 @@ def wait_for_capture(b: bus.Bus, camera: str, timeout_s: float) -> Capture:
             if done.is_set():
                 return
             if name == colour_key:
-                colours[stamp] = images.rgb(image)
+                colours[stamp] = pictures.rgb(image)
             elif name == depth_key:
-                depths[stamp] = images.depth_m(image)
+                depths[stamp] = pictures.depth_m(image)
             if stamp in colours and stamp in depths:
                 found.append(Capture(stamp, colours[stamp], depths[stamp]))
                 done.set()
             # A pair turns up within a few captures; keep the waiting pictures few.
-            for pictures in (colours, depths):
-                while len(pictures) > 10:
-                    del pictures[next(iter(pictures))]
+            for waiting in (colours, depths):
+                while len(waiting) > 10:
+                    del waiting[next(iter(waiting))]
 
     b.subscribe(colour_key, Image, on_image)
     b.subscribe(depth_key, Image, on_image)
     log.info("waiting for one capture on %s and %s", b.key(colour_key), b.key(depth_key))
     if not done.wait(timeout_s):
         with lock:
-            got = [
-                key for key, pictures in ((colour_key, colours), (depth_key, depths)) if pictures
-            ]
+            got = [key for key, waiting in ((colour_key, colours), (depth_key, depths)) if waiting]
         raise NothingArrived(
             f"no capture of {camera} within {timeout_s:g} s"
             + (f" (only {', '.join(got)})" if got else "")

@@ -25,10 +25,10 @@ import time
 import numpy as np
 import numpy.typing as npt
 
+from onebox import bus, geometry, pictures, sync
+from onebox.errors import SettingError
+from onebox.sync import StampClock, Stamped, StampMatcher
 from schemas import FLOAT32, UINT32, CameraInfo, Header, Image, PointCloud, PointField
-from services import bus, images, measure
-from services.errors import SettingError
-from services.locator import StampClock, Stamped, StampMatcher
 
 log = logging.getLogger("points")
 
@@ -68,20 +68,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def point_cloud(
-    depth_m: measure.Float32Array,
-    lens: measure.Intrinsics,
+    depth_m: geometry.Float32Array,
+    lens: geometry.Intrinsics,
     colour: npt.NDArray[np.uint8] | None,
     header: Header,
 ) -> PointCloud:
     """The cloud message of one capture."""
-    points = measure.cloud_points(depth_m, lens, colour)
+    points = pictures.cloud_points(depth_m, lens, colour)
     return PointCloud(
         header=header,
         height=1,
         width=len(points),
         fields=FIELDS,
-        point_step=measure.CLOUD_DTYPE.itemsize,
-        row_step=measure.CLOUD_DTYPE.itemsize * len(points),
+        point_step=pictures.CLOUD_DTYPE.itemsize,
+        row_step=pictures.CLOUD_DTYPE.itemsize * len(points),
         data=points.tobytes(),
         is_dense=True,
     )
@@ -92,13 +92,13 @@ class Points:
 
     def __init__(self, b: bus.Bus, args: argparse.Namespace) -> None:
         self._bus = b
-        self._report = bus.ReportLimiter(log, interval_s=args.log_interval_s)
+        self._report = sync.ReportLimiter(log, interval_s=args.log_interval_s)
         self._matcher = StampMatcher(
             ["depth", "colour", "info"],
             slop_ns=round(args.slop_ms * 1e6),
             on_unmatched=self._unmatched,
         )
-        self._matched: bus.NewestQueue[dict[str, Stamped]] = bus.NewestQueue(maxlen=2)
+        self._matched: sync.NewestQueue[dict[str, Stamped]] = sync.NewestQueue(maxlen=2)
         self._clock = StampClock()
         self._publisher = b.publisher(POINTS_KEY, PointCloud)
         self.published = 0
@@ -117,23 +117,23 @@ class Points:
 
     def _on_depth(self, key: str, image: Image) -> None:
         try:
-            depth_m = images.depth_m(image)
-        except measure.ImageError as e:
+            depth_m = pictures.depth_m(image)
+        except pictures.ImageError as e:
             self._report.warn(key, e.kind, f"dropped: {e}")
             return
         self._offer(key, "depth", image.header.stamp_ns, (image.header, depth_m))
 
     def _on_colour(self, key: str, image: Image) -> None:
         try:
-            rgb = images.rgb(image)
-        except measure.ImageError as e:
+            rgb = pictures.rgb(image)
+        except pictures.ImageError as e:
             self._report.warn(key, e.kind, f"dropped: {e}")
             return
         self._offer(key, "colour", image.header.stamp_ns, rgb)
 
     def _on_info(self, key: str, info: CameraInfo) -> None:
         try:
-            lens = measure.Intrinsics.from_k(info.k)
+            lens = geometry.Intrinsics.from_k(info.k)
         except ValueError as e:
             self._report.warn(key, "lens", f"dropped: {e}")
             return

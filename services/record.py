@@ -37,9 +37,9 @@ from typing import TextIO
 
 import zenoh
 
-from services import bus, settings
-from services.errors import RecordingError
-from services.recording import COMPRESSIONS, ByteBudgetQueue, RecordingWriter
+from onebox import bus, settings
+from onebox.errors import RecordingError
+from onebox.recording import COMPRESSIONS, ByteBudgetQueue, RecordingWriter
 
 log = logging.getLogger("record")
 

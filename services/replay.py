@@ -30,10 +30,10 @@ from typing import Any
 
 import zenoh
 
+from onebox import bus
+from onebox.errors import RecordingError
+from onebox.recording import TYPES_BY_NAME, Recorded, describe, has_header, iter_messages
 from schemas import Clock, Message, codec, type_for_key
-from services import bus
-from services.errors import RecordingError
-from services.recording import TYPES_BY_NAME, Recorded, describe, has_header, iter_messages
 
 log = logging.getLogger("replay")
 

@@ -11,7 +11,7 @@ import argparse
 import logging
 import threading
 
-from services import bus
+from onebox import bus
 
 log = logging.getLogger("router")
 

@@ -28,22 +28,11 @@ from dataclasses import dataclass
 from typing import Any
 
 import mujoco
-import numpy as np
 
-from schemas import (
-    CameraInfo,
-    Clock,
-    GroundTruth,
-    Header,
-    Image,
-    TFMessage,
-    Transform,
-    TransformStamped,
-)
-from services import bus, settings
-from services.errors import SettingError
-from services.render import Capture, SceneRenderer
-from services.scene import (
+from onebox import bus, pictures, settings
+from onebox.errors import SettingError
+from onebox.world.render import SceneRenderer
+from onebox.world.scene import (
     OPTICAL_FRAME,
     WORLD_FRAME,
     CameraSpec,
@@ -54,6 +43,16 @@ from services.scene import (
     cameras,
     optical_pose,
     static_transforms,
+)
+from schemas import (
+    CameraInfo,
+    Clock,
+    GroundTruth,
+    Header,
+    Image,
+    TFMessage,
+    Transform,
+    TransformStamped,
 )
 
 log = logging.getLogger("sim")
@@ -95,28 +94,6 @@ def scene_settings(args: argparse.Namespace) -> SceneSettings:
         box_size=args.box_size,
         box_yaw_deg=args.box_yaw_deg,
     )
-
-
-def image_messages(cam: CameraSpec, capture: Capture, header: Header) -> tuple[Image, Image]:
-    """The colour (rgb8) and depth (32FC1) messages of one capture."""
-    colour = Image(
-        header=header,
-        height=cam.height,
-        width=cam.width,
-        encoding="rgb8",
-        step=cam.width * 3,
-        data=capture.rgb.tobytes(),
-    )
-    depth = Image(
-        header=header,
-        height=cam.height,
-        width=cam.width,
-        encoding="32FC1",
-        is_bigendian=int(np.little_endian is False),
-        step=cam.width * 4,
-        data=capture.depth_m.tobytes(),
-    )
-    return colour, depth
 
 
 @dataclass
@@ -239,7 +216,9 @@ def publish_capture(
             )
         )
         cam.info.publish(camera_info(cam.spec, stamp_ns))
-        colour, depth = image_messages(cam.spec, renderer.render(data, cam.spec.name), header)
+        capture = renderer.render(data, cam.spec.name)
+        colour = pictures.rgb8_image(capture.rgb, header)
+        depth = pictures.depth_image(capture.depth_m, header)
         cam.depth.publish(depth)
         cam.colour.publish(colour)
 

@@ -19,9 +19,9 @@ import threading
 import time
 from pathlib import Path
 
-from services import bus, settings
-from services.errors import NothingArrived, RecordingError
-from services.recording import RecordingWriter, stamp_ns
+from onebox import bus, settings
+from onebox.errors import NothingArrived, RecordingError
+from onebox.recording import RecordingWriter, stamp_ns
 
 log = logging.getLogger("snapshot")
 

@@ -28,20 +28,13 @@ A slow viewer keeps the newest message on each key and says how many it dropped.
 from __future__ import annotations
 
 import argparse
-import contextlib
-import importlib.util
 import logging
-import os
-import shutil
-import socket
-import subprocess
 import threading
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
-import rerun as rr
-
+from onebox import bus, rerun_scene, rerun_sink, settings, sync
+from onebox.pictures import ImageError
 from schemas import (
     CameraInfo,
     Detection3DArray,
@@ -52,20 +45,12 @@ from schemas import (
     TFMessage,
     TransformStamped,
 )
-from services import bus, rerun_log, settings
-from services.errors import OneboxError
-from services.images import ImageError
 
 log = logging.getLogger("viewer")
 
-APPLICATION_ID = "onebox"
 COMPLETE = frozenset({"colour", "depth", "info", "points", "detections"})
 """What one capture must have logged to count towards --frames. Not the pose: a recording
 without one (the committed capture) places the camera by tf_static instead."""
-
-
-class ViewerError(OneboxError):
-    """The Rerun viewer could not be started or reached."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -127,121 +112,6 @@ class LatestPerKey:
             return items
 
 
-def has_display() -> bool:
-    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
-
-
-def rerun_executable() -> str:
-    """The ``rerun`` binary the rerun-sdk wheel ships (RERUN_CLI_PATH overrides it)."""
-    override = os.environ.get("RERUN_CLI_PATH")
-    if override:
-        return override
-    spec = importlib.util.find_spec("rerun_cli")
-    if spec is not None and spec.origin is not None:
-        bundled = Path(spec.origin).parent / "rerun"
-        if bundled.exists():
-            return str(bundled)
-    found = shutil.which("rerun")
-    if found is None:
-        raise ViewerError("no `rerun` executable: reinstall rerun-sdk (pip install rerun-sdk)")
-    return found
-
-
-def _port_free(port: int) -> bool:
-    with socket.socket() as s:
-        # As the server will: a port whose last connections linger in TIME_WAIT is free.
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            s.bind(("127.0.0.1", port))
-        except OSError:
-            return False
-    return True
-
-
-def _wait_for_port(port: int, proc: subprocess.Popen[bytes], timeout_s: float) -> None:
-    deadline = time.monotonic() + timeout_s
-    while True:
-        with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", port), 0.2):
-            return
-        if proc.poll() is not None:
-            raise ViewerError(f"the Rerun web server exited with code {proc.returncode}")
-        if time.monotonic() > deadline:
-            raise ViewerError(f"the Rerun web server did not listen on 127.0.0.1:{port}")
-        time.sleep(0.05)  # polling a port that has no event to wait on
-
-
-@contextlib.contextmanager
-def web_server(grpc_port: int, web_port: int, memory_limit: str) -> Iterator[str]:
-    """A loopback-only ``rerun --serve-web`` child; yields the gRPC address to log to."""
-    for port, flag in ((grpc_port, "--grpc-port"), (web_port, "--web-port")):
-        if not _port_free(port):
-            raise ViewerError(
-                f"port {port} on 127.0.0.1 is taken (another viewer?): choose another with {flag}"
-            )
-    # The SDK's own serve_web_viewer() binds every interface; the CLI can bind loopback only.
-    cmd = [
-        rerun_executable(),
-        "--serve-web",
-        "--bind",
-        "127.0.0.1",
-        "--port",
-        str(grpc_port),
-        "--web-viewer-port",
-        str(web_port),
-        "--server-memory-limit",
-        memory_limit,
-    ]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    try:
-        _wait_for_port(grpc_port, proc, timeout_s=20.0)
-        _wait_for_port(web_port, proc, timeout_s=20.0)
-        yield f"rerun+http://127.0.0.1:{grpc_port}/proxy"
-    finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-
-
-def web_address(grpc_port: int, web_port: int) -> str:
-    """The page to open: the web viewer, told where the data is."""
-    return f"http://127.0.0.1:{web_port}/?url=rerun%2Bhttp://127.0.0.1:{grpc_port}/proxy"
-
-
-@contextlib.contextmanager
-def open_recording(args: argparse.Namespace) -> Iterator[rr.RecordingStream]:
-    """A recording sent where the flags say; a saved file is complete when the block ends."""
-    rec = rr.RecordingStream(APPLICATION_ID)
-    blueprint = rerun_log.blueprint(args.camera)
-    with contextlib.ExitStack() as stack:
-        if args.save is not None:
-            args.save.parent.mkdir(parents=True, exist_ok=True)
-            rec.save(args.save, default_blueprint=blueprint)
-            print(f"viewer: writing {args.save}", flush=True)
-        elif has_display() and not args.web:
-            rec.spawn(port=args.grpc_port, default_blueprint=blueprint)
-            print("viewer: opened the Rerun viewer", flush=True)
-        else:
-            url = stack.enter_context(web_server(args.grpc_port, args.web_port, args.memory_limit))
-            rec.connect_grpc(url, default_blueprint=blueprint)
-            print(
-                f"viewer: no display; open {web_address(args.grpc_port, args.web_port)}",
-                flush=True,
-            )
-        # Leaving `with rec` flushes and finalizes the .rrd (writes its footer).
-        try:
-            with rec:
-                yield rec
-        except RuntimeError as e:
-            # honcho stops the whole process group at once, so the web server (our child) may
-            # be gone before the last flush; what was not sent had no one left to see it.
-            if args.save is not None or "gRPC" not in str(e):
-                raise
-            log.info("the web viewer stopped first; nothing more to send")
-
-
 def idle() -> int:
     """The seed's rviz:=false: stay up, doing nothing, so honcho keeps the rest running."""
     log.info("viewer off (VIEWER=false); idling until stopped")
@@ -259,15 +129,23 @@ KEYS: dict[str, type[Message]] = {
 
 
 def main(args: argparse.Namespace) -> int:
+    sink = rerun_sink.Sink(
+        save=args.save,
+        web=args.web,
+        camera=args.camera,
+        grpc_port=args.grpc_port,
+        web_port=args.web_port,
+        memory_limit=args.memory_limit,
+    )
     if not args.viewer:
         return idle()
     inbox = LatestPerKey()
-    limiter = bus.ReportLimiter(log, interval_s=10.0)
+    limiter = sync.ReportLimiter(log, interval_s=10.0)
     kinds_by_stamp: dict[int, set[str]] = {}
     complete = 0
     started = time.monotonic()
-    with bus.open_bus(args) as b, open_recording(args) as rec:
-        scene = rerun_log.SceneLog(rec, camera=args.camera, table_z_m=args.table_z)
+    with bus.open_bus(args) as b, rerun_sink.open_recording(sink) as rec:
+        scene = rerun_scene.SceneLog(rec, camera=args.camera, table_z_m=args.table_z)
         scene.start()
 
         def on_message(key: str, message: Message) -> None:

@@ -8,10 +8,10 @@ import threading
 
 import pytest
 
+from onebox import bus, settings, sync
+from onebox.errors import SettingError
+from onebox.testing.processes import Inbox, bus_args, has_key
 from schemas import Clock, Image, codec
-from services import bus, settings
-from services.errors import SettingError
-from tests.conftest import Inbox, bus_args, has_key
 
 
 def test_garbage_is_logged_with_its_key_and_dropped(
@@ -84,7 +84,7 @@ def test_namespace_prefixes_every_key(router: str) -> None:
 
 def test_newest_queue_keeps_the_newest_and_counts_drops() -> None:
     """A full queue drops its oldest item, counts it, and hands out the newest."""
-    q: bus.NewestQueue[int] = bus.NewestQueue(maxlen=2)
+    q: sync.NewestQueue[int] = sync.NewestQueue(maxlen=2)
     for i in range(5):
         q.put(i)
     assert q.dropped == 3
@@ -94,10 +94,10 @@ def test_newest_queue_keeps_the_newest_and_counts_drops() -> None:
 def test_settings_precedence(monkeypatch: pytest.MonkeyPatch) -> None:
     """A flag beats the environment, which beats config/onebox.toml, which beats the default."""
     parser = argparse.ArgumentParser()
-    monkeypatch.delenv("HFOV_DEG", raising=False)
+    monkeypatch.delenv("ONEBOX_HFOV_DEG", raising=False)
     settings.add(parser, "hfov_deg", 45.0, "lens")
     assert parser.parse_args([]).hfov_deg == 60.0  # the file's value, not the fallback
-    monkeypatch.setenv("HFOV_DEG", "90")
+    monkeypatch.setenv("ONEBOX_HFOV_DEG", "90")
     parser = argparse.ArgumentParser()
     settings.add(parser, "hfov_deg", 45.0, "lens")
     assert parser.parse_args([]).hfov_deg == 90.0
@@ -105,16 +105,16 @@ def test_settings_precedence(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 def test_bad_environment_value_names_the_variable(monkeypatch: pytest.MonkeyPatch) -> None:
-    """HFOV_DEG=wide is reported as that variable and value, not a traceback from deep inside."""
-    monkeypatch.setenv("HFOV_DEG", "wide")
-    with pytest.raises(SettingError, match="HFOV_DEG='wide'"):
+    """ONEBOX_HFOV_DEG=wide is reported as that variable and value, not a deep traceback."""
+    monkeypatch.setenv("ONEBOX_HFOV_DEG", "wide")
+    with pytest.raises(SettingError, match="ONEBOX_HFOV_DEG='wide'"):
         settings.add(argparse.ArgumentParser(), "hfov_deg", 60.0, "lens")
 
 
 @pytest.mark.parametrize(("text", "value"), [("false", False), ("0", False), ("On", True)])
 def test_yes_no_settings(monkeypatch: pytest.MonkeyPatch, text: str, value: bool) -> None:
-    """VIEWER=false and friends parse as the seed's rviz:=false did."""
-    monkeypatch.setenv("VIEWER", text)
+    """ONEBOX_VIEWER=false and friends parse as the seed's rviz:=false did."""
+    monkeypatch.setenv("ONEBOX_VIEWER", text)
     parser = argparse.ArgumentParser()
     settings.add(parser, "viewer", True, "viewer")
     assert parser.parse_args([]).viewer is value

@@ -5,11 +5,11 @@ from __future__ import annotations
 import subprocess
 import sys
 
+from onebox.recording import describe
+from onebox.testing.fake_capture import write_mcap
+from onebox.testing.processes import CAPTURE, ROOT, free_port
 from schemas import TYPES, CameraInfo, Header, Image
 from services import check
-from services.recording import describe
-from tests.conftest import CAPTURE, ROOT, free_port
-from tests.fake_capture import write_mcap
 
 
 def run_check(endpoint: str, *args: str) -> subprocess.CompletedProcess[str]:
@@ -54,7 +54,7 @@ def test_check_lists_a_replay_with_types_rates_lens_and_one_of_each(processes, t
         assert TYPES[key].__qualname__ in lines[key], lines[key]
         assert "Hz" in lines[key]
     assert "latched" in lines["tf_static"]
-    assert "camera/camera_info: 320 x 240, fx 277.128  fy 277.128  cx 160.000  cy 120.000" in out
+    assert "camera/camera_info: 320 x 240, fx 277.128  fy 277.128  cx 159.500  cy 119.500" in out
     assert "data: <230400 bytes>" in out and "data: <307200 bytes>" in out
     assert "class_id: box" in out and "one detection" in out
     assert len(out) < 20_000, "the large arrays must be left out"

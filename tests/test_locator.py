@@ -12,6 +12,19 @@ import msgspec
 import numpy as np
 import pytest
 
+from onebox import bus
+from onebox.geometry import FrameTree, matrix_of
+from onebox.sync import StampMatcher
+from onebox.testing.capture import CAPTURE
+from onebox.testing.processes import Inbox, has_key
+from onebox.testing.synthetic import (
+    Scene,
+    camera_info,
+    camera_pose,
+    depth_image,
+    depth_picture,
+    tf_static,
+)
 from schemas import (
     CameraInfo,
     Detection3DArray,
@@ -20,19 +33,6 @@ from schemas import (
     TFMessage,
     TransformStamped,
     codec,
-)
-from services import bus
-from services.frames import FrameTree, matrix_of
-from services.locator import StampMatcher
-from tests.capture import CAPTURE
-from tests.conftest import Inbox, has_key
-from tests.synthetic import (
-    Scene,
-    camera_info,
-    camera_pose,
-    depth_image,
-    depth_picture,
-    tf_static,
 )
 
 SEED_LINE = "box: middle (+0.064, +0.040) m, height 0.060 m, from 2,401 points on its top"

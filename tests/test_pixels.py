@@ -8,10 +8,10 @@ import subprocess
 import numpy as np
 import pytest
 
+from onebox.testing.fake_capture import capture
+from onebox.testing.processes import wait_for_output
 from schemas import Image
 from services import pixels
-from tests.fake_capture import capture
-from tests.rrd import wait_for_output
 
 # The seed's section 5.2, exactly: the table, the box's side, the box's top.
 SEED_TABLE = """\

@@ -6,9 +6,9 @@ import time
 
 import numpy as np
 
+from onebox.testing.processes import has_key
+from onebox.testing.synthetic import Scene, camera_info, depth_image, depth_picture
 from schemas import CameraInfo, Image, PointCloud, codec
-from tests.conftest import has_key
-from tests.synthetic import Scene, camera_info, depth_image, depth_picture
 
 SCENE = Scene()
 

@@ -16,6 +16,10 @@ import pytest
 import zenoh
 from mcap.reader import make_reader
 
+from onebox.errors import RecordingError
+from onebox.recording import RecordingWriter, describe, iter_messages, read_capture
+from onebox.testing.capture import CAPTURE, load_capture
+from onebox.testing.processes import ROOT, Inbox, has_key
 from schemas import (
     CameraInfo,
     Clock,
@@ -28,10 +32,6 @@ from schemas import (
     codec,
     type_for_key,
 )
-from services.errors import RecordingError
-from services.recording import RecordingWriter, describe, iter_messages, read_capture
-from tests.capture import CAPTURE, load_capture
-from tests.conftest import ROOT, Inbox, has_key
 
 # --- messages the tests publish -----------------------------------------------------------------
 

@@ -13,6 +13,16 @@ import numpy.typing as npt
 import pytest
 from scipy.spatial.transform import Rotation
 
+from onebox import bus
+from onebox.testing.processes import (
+    ROOT,
+    Inbox,
+    Processes,
+    bus_args,
+    free_port,
+    has_key,
+    honcho_env,
+)
 from schemas import (
     CameraInfo,
     Clock,
@@ -23,8 +33,6 @@ from schemas import (
     TransformStamped,
     codec,
 )
-from services import bus
-from tests.conftest import ROOT, Inbox, Processes, bus_args, free_port, has_key, honcho_env
 
 SEED_PATCH = "\n".join(["0.400 0.400 0.400 0.373 0.340 0.340 0.340 0.340"] * 5)
 """The seed's section 5.2: basic camera rows 19-23, columns 43-50, metres to three decimals."""
@@ -131,7 +139,7 @@ def test_every_pixel_into_the_room_gives_the_seeds_counts(default_run: Run) -> N
     assert isinstance(info, CameraInfo)
     depth = depth_of(default_run.first("camera/depth/image_raw")).astype(np.float64)
     fx, cx, fy, cy = info.k[0], info.k[2], info.k[4], info.k[5]
-    v, u = np.mgrid[0 : info.height, 0 : info.width] + 0.5  # the middle of each pixel
+    v, u = np.mgrid[0 : info.height, 0 : info.width]  # the middle of pixel u is at u
     camera = np.stack([(u - cx) * depth / fx, (v - cy) * depth / fy, depth], axis=-1)
     tf = default_run.first("tf_static")
     assert isinstance(tf, TFMessage)
@@ -174,13 +182,13 @@ def test_frames_agree_with_mujocos_camera(default_run: Run) -> None:
 
 
 def test_camera_info_at_the_defaults(default_run: Run) -> None:
-    """fx = fy = 277.128..., cx = 160, cy = 120, no distortion, P = [K | 0]."""
+    """fx = fy = 277.128..., cx = 159.5, cy = 119.5 (the middle of pixel u at u), P = [K | 0]."""
     info = default_run.first("camera/camera_info")
     assert isinstance(info, CameraInfo)
     f = 160 / math.tan(math.radians(30))
-    assert info.k == pytest.approx([f, 0, 160, 0, f, 120, 0, 0, 1])
+    assert info.k == pytest.approx([f, 0, 159.5, 0, f, 119.5, 0, 0, 1])
     assert f"{info.k[0]:.3f}" == "277.128"
-    assert info.p == pytest.approx([f, 0, 160, 0, 0, f, 120, 0, 0, 0, 1, 0])
+    assert info.p == pytest.approx([f, 0, 159.5, 0, 0, f, 119.5, 0, 0, 0, 1, 0])
     assert info.d == [0.0] * 5
     assert (info.width, info.height, info.header.frame_id) == (320, 240, "camera_optical_frame")
 
@@ -213,7 +221,7 @@ def test_picture_is_lit_like_the_seeds(default_run: Run) -> None:
 @pytest.mark.parametrize(
     ("flags", "env", "width", "height", "hfov_deg"),
     [
-        ((), {"HFOV_DEG": "90"}, 320, 240, 90.0),
+        ((), {"ONEBOX_HFOV_DEG": "90"}, 320, 240, 90.0),
         (("--hfov-deg", "90"), {}, 320, 240, 90.0),
         (("--width", "640", "--height", "480"), {}, 640, 480, 60.0),
     ],
@@ -232,7 +240,7 @@ def test_lens_and_picture_change_together(
     info = run.first("camera/camera_info")
     assert isinstance(info, CameraInfo)
     f = width / 2 / math.tan(math.radians(hfov_deg) / 2)
-    assert info.k == pytest.approx([f, 0, width / 2, 0, f, height / 2, 0, 0, 1])
+    assert info.k == pytest.approx([f, 0, (width - 1) / 2, 0, f, (height - 1) / 2, 0, 0, 1])
     depth = depth_of(run.first("camera/depth/image_raw"))
     assert depth.shape == (height, width)
     # The box's top spans x 0.035..0.095 at depth 0.34; along the row through its middle

@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 import rerun as rr
 
+from onebox import rerun_scene
+from onebox.testing.fake_capture import BOX_CENTRE, BOX_SIZE, capture, tf_static, write_mcap
+from onebox.testing.processes import CAPTURE, ROOT, free_port, honcho_env, wait_for_output
+from onebox.testing.rrd import contents
 from schemas import Detection3DArray, Image, TFMessage, codec, type_for_key
-from services import rerun_log
-from tests.conftest import CAPTURE, ROOT, free_port, honcho_env
-from tests.fake_capture import BOX_CENTRE, BOX_SIZE, capture, tf_static, write_mcap
-from tests.rrd import contents, wait_for_output
 
 
 def publish_until_exit(test_bus, proc: subprocess.Popen[str], camera: str = "camera") -> None:
@@ -98,8 +98,8 @@ def test_viewer_keeps_going_after_bad_messages(processes, test_bus, tmp_path):
 
 
 def test_viewer_off_idles_until_stopped(processes):
-    """VIEWER=false logs "viewer off", stays up (honcho would stop everything) and exits 0."""
-    proc = processes.start("viewer", env={"VIEWER": "false"})
+    """ONEBOX_VIEWER=false logs "viewer off", stays up (honcho would stop all) and exits 0."""
+    proc = processes.start("viewer", env={"ONEBOX_VIEWER": "false"})
     wait_for_output(proc, "viewer off", timeout_s=20)
     assert proc.poll() is None
     processes.stop(proc)
@@ -137,7 +137,7 @@ def test_scene_log_draws_an_empty_detection_array_as_no_box(tmp_path):
     msgs = capture(200_000_000)
     empty = type(msgs["detections"])()
     with rec:
-        scene = rerun_log.SceneLog(rec)
+        scene = rerun_scene.SceneLog(rec)
         scene.start()
         assert scene.log("detections", msgs["detections"]) == "detections"
         assert scene.log("detections", empty) == "detections"
@@ -151,7 +151,7 @@ def test_every_pipeline_type_round_trips_through_scene_log(tmp_path):
     rec = rr.RecordingStream("onebox_test")
     rec.save(tmp_path / "kinds.rrd")
     with rec:
-        scene = rerun_log.SceneLog(rec)
+        scene = rerun_scene.SceneLog(rec)
         kinds = {}
         for key, message in capture(1).items():
             wire = codec(type(message)).encode(message)
@@ -206,7 +206,7 @@ def test_camera_sits_on_the_tf_static_chain_until_a_pose_arrives(tmp_path):
     rec.save(out)
     msgs = capture(200_000_000)
     with rec:
-        scene = rerun_log.SceneLog(rec)
+        scene = rerun_scene.SceneLog(rec)
         scene.log("tf_static", tf_static())
         scene.log("camera/image_raw", msgs["camera/image_raw"])
     camera = contents(out)["/world/camera"]
@@ -247,9 +247,9 @@ def test_viewer_fed_a_replay_of_the_committed_capture(processes, test_bus, tmp_p
 
 
 def test_honcho_start_with_viewer_false_runs_without_a_viewer(tmp_path):
-    """HFOV_DEG=90 VIEWER=false honcho start: everything runs, the viewer idles, the lens is 90°."""
+    """ONEBOX_HFOV_DEG=90 ONEBOX_VIEWER=false honcho start: all runs, the viewer idles, 90° lens."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    env = honcho_env(ONEBOX_ROUTER=endpoint, HFOV_DEG="90", VIEWER="false")
+    env = honcho_env(ONEBOX_ROUTER=endpoint, ONEBOX_HFOV_DEG="90", ONEBOX_VIEWER="false")
     honcho = subprocess.Popen(
         [sys.executable, "-m", "honcho", "start"],
         cwd=ROOT,

@@ -1,6 +1,6 @@
 """Settings: a flag, then an environment variable, then config/onebox.toml, then the default.
 
-The seed passed launch arguments as ``name:=value``; here ``HFOV_DEG=90 honcho start`` or
+The seed passed launch arguments as ``name:=value``; here ``ONEBOX_HFOV_DEG=90 honcho start`` or
 ``onebox sim --hfov-deg 90`` do the same. Every service adds its settings with :func:`add`, so
 the precedence and the error for a bad value live in one place.
 """
@@ -9,18 +9,30 @@ from __future__ import annotations
 
 import argparse
 import functools
+import importlib.resources
 import os
 import tomllib
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from services.errors import SettingError
+from onebox.errors import SettingError
 
-ROOT = Path(__file__).resolve().parent.parent
-"""The repository: scene/ and config/ live beside services/."""
-CONFIG_DIR = ROOT / "config"
-SCENE_DIR = ROOT / "scene"
+PREFIX = "ONEBOX_"
+"""Every setting's environment variable starts with this: ``ONEBOX_HFOV_DEG=90 honcho start``."""
+
+
+def data_dir(name: str) -> Path:
+    """``config`` or ``scene``: the checkout's own folder (where people edit) when onebox runs
+    from a checkout, else the copy installed inside the package."""
+    checkout = Path(__file__).resolve().parent.parent / name
+    if checkout.is_dir():
+        return checkout
+    return Path(str(importlib.resources.files("onebox") / name))
+
+
+CONFIG_DIR = data_dir("config")
+SCENE_DIR = data_dir("scene")
 SETTINGS_FILE = CONFIG_DIR / "onebox.toml"
 
 
@@ -51,9 +63,14 @@ def parse_bool(text: str) -> bool:
     raise argparse.ArgumentTypeError(f"expected true or false, got {text!r}")
 
 
+def env_variable(name: str) -> str:
+    """The environment variable of setting ``name``: ``hfov_deg`` is ``ONEBOX_HFOV_DEG``."""
+    return PREFIX + name.upper()
+
+
 def default(name: str, fallback: Any, kind: Callable[[str], Any]) -> Any:
     """The value of setting ``name`` before any flag: environment, then file, then ``fallback``."""
-    env_name = name.upper()
+    env_name = env_variable(name)
     if env_name in os.environ:
         raw = os.environ[env_name]
         try:
@@ -82,6 +99,6 @@ def add(
         type=kind,
         default=value,
         metavar=name.upper(),
-        help=f"{help} (default {value!r}; environment {name.upper()})",
+        help=f"{help} (default {value!r}; environment {env_variable(name)})",
         **extra,
     )

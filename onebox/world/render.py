@@ -16,8 +16,8 @@ import numpy as np
 import numpy.typing as npt
 from mujoco.rendering.classic.gl_context import GLContext
 
-from services.errors import SceneError
-from services.scene import MAX_RANGE_M, MIN_RANGE_M, CameraSpec
+from onebox.errors import SceneError
+from onebox.world.scene import MAX_RANGE_M, MIN_RANGE_M, CameraSpec
 
 
 @dataclass

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from onebox.recording import RecordingWriter
 from schemas import (
     FLOAT32,
     UINT32,
@@ -33,7 +34,6 @@ from schemas import (
     Vector3,
     codec,
 )
-from services.recording import RecordingWriter
 
 OPTICAL = "camera_optical_frame"
 BOX_CENTRE = (0.065, 0.0405, 0.03)
@@ -42,7 +42,7 @@ BOX_SIZE = (0.06, 0.06, 0.06)
 
 def k(width: int, height: int, hfov_deg: float = 60.0) -> list[float]:
     f = width / 2 / math.tan(math.radians(hfov_deg) / 2)
-    return [f, 0.0, width / 2, 0.0, f, height / 2, 0.0, 0.0, 1.0]
+    return [f, 0.0, (width - 1) / 2, 0.0, f, (height - 1) / 2, 0.0, 0.0, 1.0]
 
 
 def pictures(width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
@@ -65,7 +65,7 @@ def capture(
     rgb, depth = pictures(width, height)
     intrinsics = k(width, height)
     fx, cx, cy = intrinsics[0], intrinsics[2], intrinsics[5]
-    v, u = np.mgrid[0:height, 0:width] + 0.5
+    v, u = np.mgrid[0:height, 0:width]
     xyz = np.stack([(u - cx) * depth / fx, (v - cy) * depth / fx, depth], axis=-1)
     packed = (
         (rgb[..., 0].astype(np.uint32) << 16)

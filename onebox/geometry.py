@@ -1,21 +1,90 @@
-"""A small frame tree, the part of tf2 the locator needs: where one frame sits in another.
+"""Geometry: the lens, shifts and turns as 4 x 4 matrices, and the frame tree.
 
-Fill it with the TransformStamped messages of ``tf_static`` (each says where a child frame sits
-in its parent, as a shift and a turn) and ask :meth:`FrameTree.lookup` for ``parent <- child``
-between any two connected frames: up from the child to the root of the tree, composing 4 x 4
-matrices, and back down to the parent by the inverse. A frame that is not connected raises
-:class:`FrameError` naming the frames that are known.
+The frame tree is the part of tf2 the locator needs: fill it with the TransformStamped messages
+of ``tf_static`` (each says where a child frame sits in its parent) and ask
+:meth:`FrameTree.lookup` for ``parent <- child`` between any two connected frames.
+
+Pixels follow real cameras' CameraInfo (OpenCV, depth_image_proc): the middle of pixel ``u``
+is at ``u``, so a centred 320-wide lens has cx = 159.5. The seed wrote the same lens the other
+way (the middle of pixel ``u`` at ``u + 0.5``, cx = 160); :meth:`Intrinsics.seed_cx` converts.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+import functools
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
+from scipy.spatial.transform import Rotation
 
+from onebox.errors import OneboxError
 from schemas import TransformStamped
-from services.errors import OneboxError
-from services.measure import Float64Array, transform_matrix
+
+Float32Array = npt.NDArray[np.float32]
+Float64Array = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    """The four lens numbers, in pixels: K = [fx 0 cx; 0 fy cy; 0 0 1], middle of pixel u at u."""
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+    @classmethod
+    def from_k(cls, k: Sequence[float]) -> Intrinsics:
+        """Read a row-major 3 x 3 K; raises ValueError when it cannot be a pinhole lens."""
+        if len(k) != 9:
+            raise ValueError(f"K has {len(k)} numbers, expected 9 (3 x 3, row-major)")
+        fx, fy, cx, cy = float(k[0]), float(k[4]), float(k[2]), float(k[5])
+        if not all(np.isfinite([fx, fy, cx, cy])) or fx <= 0.0 or fy <= 0.0:
+            raise ValueError(f"K has fx={fx}, fy={fy}, cx={cx}, cy={cy}; fx and fy must be > 0")
+        return cls(fx, fy, cx, cy)
+
+    def rays(self, width: int, height: int) -> tuple[Float64Array, Float64Array]:
+        """Each column's (u - cx) / fx and each row's (v - cy) / fy (cached per size and lens).
+
+        A pixel (v, u) with depth d is the optical-frame point (across[u] d, down[v] d, d).
+        """
+        return _rays(width, height, self)
+
+
+@functools.lru_cache(maxsize=16)
+def _rays(width: int, height: int, lens: Intrinsics) -> tuple[Float64Array, Float64Array]:
+    across: Float64Array = (np.arange(width, dtype=np.float64) - lens.cx) / lens.fx
+    down: Float64Array = (np.arange(height, dtype=np.float64) - lens.cy) / lens.fy
+    across.flags.writeable = False
+    down.flags.writeable = False
+    return across, down
+
+
+def transform_matrix(
+    translation: Sequence[float], quaternion_xyzw: Sequence[float]
+) -> Float64Array:
+    """A shift and a turn as a 4 x 4 matrix moving a child frame's points into its parent.
+
+    Raises ValueError for a quaternion of length zero or any number that is not finite.
+    """
+    numbers = [*translation, *quaternion_xyzw]
+    if len(numbers) != 7 or not np.all(np.isfinite(numbers)):
+        raise ValueError(f"a transform needs 3 finite numbers and 4 finite numbers, got {numbers}")
+    matrix = np.eye(4)
+    matrix[:3, :3] = Rotation.from_quat(quaternion_xyzw).as_matrix()
+    matrix[:3, 3] = translation
+    return matrix
+
+
+def to_world(points: npt.NDArray[np.floating], matrix: Float64Array) -> Float64Array:
+    """Move (N, 3) points with a 4 x 4 matrix: start at its position, walk its three columns."""
+    result: Float64Array = points @ matrix[:3, :3].T + matrix[:3, 3]
+    return result
+
+
+# --- the frame tree ----------------------------------------------------------------------------
 
 
 class FrameError(OneboxError):

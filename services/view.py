@@ -23,10 +23,10 @@ from pathlib import Path
 
 import msgspec
 
+from onebox import recording, rerun_scene, rerun_sink, settings, sync
+from onebox.errors import RecordingError
+from onebox.pictures import ImageError
 from schemas import codec, type_for_key
-from services import bus, recording, rerun_log, settings, viewer
-from services.errors import RecordingError
-from services.images import ImageError
 
 log = logging.getLogger("view")
 
@@ -52,12 +52,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     settings.add(parser, "namespace", "", "the prefix the recorded keys carry, if any")
 
 
-def log_file(path: Path, scene: rerun_log.SceneLog, namespace: str, recover: bool) -> int:
+def log_file(path: Path, scene: rerun_scene.SceneLog, namespace: str, recover: bool) -> int:
     """Log every drawable message of ``path``; returns how many were logged."""
     prefix = f"{namespace.strip('/')}/" if namespace else ""
     logged = skipped = 0
     last_report = time.monotonic()
-    limiter = bus.ReportLimiter(log)
+    limiter = sync.ReportLimiter(log)
     for item in recording.iter_messages(path, recover=recover):
         message_type = recording.TYPES_BY_NAME.get(item.schema_name) or type_for_key(
             item.key, namespace
@@ -84,10 +84,18 @@ def log_file(path: Path, scene: rerun_log.SceneLog, namespace: str, recover: boo
 
 
 def main(args: argparse.Namespace) -> int:
+    sink = rerun_sink.Sink(
+        save=args.save,
+        web=args.web,
+        camera=args.camera,
+        grpc_port=args.grpc_port,
+        web_port=args.web_port,
+        memory_limit=args.memory_limit,
+    )
     if not args.file.exists():
         raise RecordingError(f"{args.file} does not exist: give the path of an .mcap recording")
-    with viewer.open_recording(args) as rec:
-        scene = rerun_log.SceneLog(rec, camera=args.camera, table_z_m=args.table_z)
+    with rerun_sink.open_recording(sink) as rec:
+        scene = rerun_scene.SceneLog(rec, camera=args.camera, table_z_m=args.table_z)
         scene.start()
         logged = log_file(args.file, scene, args.namespace, args.recover)
         if logged == 0:

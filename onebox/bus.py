@@ -15,13 +15,11 @@
 from __future__ import annotations
 
 import argparse
-import collections
 import contextlib
 import logging
 import os
 import signal
 import threading
-import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,9 +30,10 @@ import msgspec
 import zenoh
 import zenoh.ext
 
+from onebox import settings
+from onebox.errors import BusError
+from onebox.sync import ReportLimiter
 from schemas import Message, codec
-from services import settings
-from services.errors import BusError
 
 log = logging.getLogger("bus")
 
@@ -107,58 +106,6 @@ def install_signal_handlers() -> None:
         raise KeyboardInterrupt(signal.Signals(signum).name)
 
     signal.signal(signal.SIGTERM, _raise)
-
-
-class ReportLimiter:
-    """Logs a problem once per key per interval, with how many were held back in between."""
-
-    def __init__(self, logger: logging.Logger, interval_s: float = 2.0) -> None:
-        self._logger = logger
-        self._interval_s = interval_s
-        self._last: dict[tuple[str, str], float] = {}
-        self._held: collections.Counter[tuple[str, str]] = collections.Counter()
-        self._lock = threading.Lock()
-
-    def warn(self, key: str, kind: str, message: str) -> None:
-        """Log ``message`` about ``key`` unless one of the same ``kind`` was logged lately."""
-        now = time.monotonic()
-        slot = (key, kind)
-        with self._lock:
-            last = self._last.get(slot)
-            if last is not None and now - last < self._interval_s:
-                self._held[slot] += 1
-                return
-            held = self._held.pop(slot, 0)
-            self._last[slot] = now
-        more = f" ({held} more like it since the last report)" if held else ""
-        self._logger.warning("%s: %s%s", key, message, more)
-
-
-class NewestQueue(Generic[T]):
-    """A bounded queue that, when full, drops the oldest item and counts it."""
-
-    def __init__(self, maxlen: int = 2) -> None:
-        self._items: collections.deque[T] = collections.deque(maxlen=maxlen)
-        self._ready = threading.Condition()
-        self.dropped = 0
-
-    def put(self, item: T) -> None:
-        with self._ready:
-            if len(self._items) == self._items.maxlen:
-                self.dropped += 1
-            self._items.append(item)
-            self._ready.notify()
-
-    def get(self, timeout_s: float | None = None) -> T | None:
-        """The oldest item kept, or None when nothing came within ``timeout_s``."""
-        with self._ready:
-            if not self._ready.wait_for(lambda: bool(self._items), timeout=timeout_s):
-                return None
-            return self._items.popleft()
-
-    def __len__(self) -> int:
-        with self._ready:
-            return len(self._items)
 
 
 class Publisher(Generic[M]):

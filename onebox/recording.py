@@ -39,8 +39,8 @@ from mcap.records import Message as McapMessage
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
+from onebox.errors import RecordingError
 from schemas import TYPES, Message, codec, json_schema, type_for_key, type_name
-from services.errors import RecordingError
 
 log = logging.getLogger("recording")
 

@@ -4,10 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from onebox.recording import read_capture
+from onebox.testing.processes import CAPTURE
 from schemas import Message
-from services.recording import read_capture
-
-CAPTURE = Path(__file__).resolve().parent / "data" / "one_box.mcap"
 
 
 def load_capture(path: Path | str = CAPTURE, namespace: str = "") -> dict[str, Message]:

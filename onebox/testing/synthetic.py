@@ -38,7 +38,8 @@ class Scene:
 
     @property
     def k(self) -> list[float]:
-        return [self.fx, 0.0, self.width / 2, 0.0, self.fx, self.height / 2, 0.0, 0.0, 1.0]
+        cx, cy = (self.width - 1) / 2, (self.height - 1) / 2
+        return [self.fx, 0.0, cx, 0.0, self.fx, cy, 0.0, 0.0, 1.0]
 
     def camera_to_world(self) -> npt.NDArray[np.float64]:
         matrix = np.eye(4)
@@ -99,7 +100,7 @@ def depth_image(depth_m: npt.NDArray[np.float32], stamp_ns: int) -> Image:
 
 
 def camera_info(scene: Scene, stamp_ns: int) -> CameraInfo:
-    fx, cx, cy = scene.fx, scene.width / 2, scene.height / 2
+    fx, cx, cy = scene.fx, (scene.width - 1) / 2, (scene.height - 1) / 2
     return CameraInfo(
         header=header(stamp_ns),
         width=scene.width,

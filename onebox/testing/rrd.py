@@ -2,10 +2,6 @@
 
 from __future__ import annotations
 
-import os
-import select
-import subprocess
-import time
 from pathlib import Path
 from typing import Any
 
@@ -27,25 +23,3 @@ def contents(path: Path) -> dict[str, dict[str, Any]]:
         if "sim_time" in batch.schema.names:
             entity.setdefault("_times", []).extend(batch.column("sim_time").to_pylist())
     return out
-
-
-def wait_for_output(proc: subprocess.Popen[str], text: str, timeout_s: float = 30.0) -> str:
-    """Read ``proc``'s output until ``text`` appears; returns what was read.
-
-    Reads the raw pipe (not the text wrapper), so Processes.stop still gets the rest later.
-    """
-    assert proc.stdout is not None
-    fd = proc.stdout.fileno()
-    seen = b""
-    deadline = time.monotonic() + timeout_s
-    while text.encode() not in seen:
-        remaining = deadline - time.monotonic()
-        if remaining <= 0:
-            raise AssertionError(f"no {text!r} within {timeout_s} s; got:\n{seen.decode()}")
-        ready, _, _ = select.select([fd], [], [], remaining)
-        if ready:
-            chunk = os.read(fd, 65536)
-            if not chunk:
-                raise AssertionError(f"exited before {text!r}; got:\n{seen.decode()}")
-            seen += chunk
-    return seen.decode()

@@ -15,9 +15,9 @@ import mujoco
 import numpy as np
 import numpy.typing as npt
 
+from onebox.errors import SceneError
+from onebox.settings import SCENE_DIR
 from schemas import CameraInfo, Header, Pose, Quaternion, Transform, TransformStamped, Vector3
-from services.errors import SceneError
-from services.settings import SCENE_DIR
 
 SCENE_FILE = SCENE_DIR / "one_box.xml"
 WORLD_FRAME = "world"
@@ -116,9 +116,10 @@ def build_model(settings: SceneSettings) -> mujoco.MjModel:
 
 
 def camera_info(cam: CameraSpec, stamp_ns: int = 0) -> CameraInfo:
-    """The lens of ``cam``: pixels measured from their top-left corner, so cx = width / 2."""
+    """The lens of ``cam`` as real cameras write it: the middle of pixel u is at u, so a
+    centred lens has cx = (width - 1) / 2 (159.5 for 320 pixels)."""
     f = cam.focal_px
-    cx, cy = cam.width / 2, cam.height / 2
+    cx, cy = (cam.width - 1) / 2, (cam.height - 1) / 2
     return CameraInfo(
         header=Header(stamp_ns=stamp_ns, frame_id=OPTICAL_FRAME),
         height=cam.height,

@@ -28,6 +28,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 from scipy.spatial.transform import Rotation
 
+from onebox import pictures
 from schemas import (
     CameraInfo,
     Detection3DArray,
@@ -40,7 +41,6 @@ from schemas import (
     TransformStamped,
 )
 from schemas.geometry import Quaternion
-from services import images
 
 log = logging.getLogger("rerun_log")
 
@@ -134,6 +134,15 @@ def world_from_frame(
     return translation, rotation
 
 
+def pinhole_matrix(k: list[float]) -> npt.NDArray[np.float64]:
+    """A CameraInfo K (the middle of pixel u at u) as Rerun's pinhole, whose pixel u spans u
+    to u + 1: the principal point moves half a pixel."""
+    matrix = np.asarray(k, dtype=np.float64).reshape(3, 3).copy()
+    matrix[0, 2] += 0.5
+    matrix[1, 2] += 0.5
+    return matrix
+
+
 class SceneLog:
     """Logs onebox messages to one Rerun recording; the key decides what a message becomes."""
 
@@ -187,7 +196,7 @@ class SceneLog:
 
         Returns what it became (``colour``, ``depth``, ``info``, ``pose``, ``points``,
         ``tf_static``, ``detections``, ``ground_truth``), or None for a key the viewer does not
-        draw. Raises images.ImageError for a picture or cloud whose numbers do not agree.
+        draw. Raises pictures.ImageError for a picture or cloud whose numbers do not agree.
         """
         prefix = f"{self.camera}/"
         if isinstance(message, TFMessage):
@@ -206,11 +215,11 @@ class SceneLog:
             self._pose_from_tf(message.header.stamp_ns, message.header.frame_id)
         if isinstance(message, Image) and rest == "image_raw":
             self._time(message.header.stamp_ns)
-            self.rec.log(f"{self._cam}/image/rgb", rr.Image(images.rgb(message)))
+            self.rec.log(f"{self._cam}/image/rgb", rr.Image(pictures.rgb(message)))
             return "colour"
         if isinstance(message, Image) and rest == "depth/image_raw":
             self._time(message.header.stamp_ns)
-            depth = images.depth_m(message)
+            depth = pictures.depth_m(message)
             valid = depth[np.isfinite(depth)]
             # Colour the readings this picture has, not 0 to the camera's 3 m range.
             near_far = (float(valid.min()), float(valid.max())) if valid.size else (0.0, 3.0)
@@ -243,7 +252,7 @@ class SceneLog:
             return "pose"
         if isinstance(message, PointCloud) and rest == "points":
             self._time(message.header.stamp_ns)
-            points = images.cloud(message)
+            points = pictures.cloud(message)
             self.rec.log(
                 f"{self._cam}/points",
                 rr.Points3D(points.xyz, colors=points.rgb, radii=POINT_RADIUS_M),
@@ -256,7 +265,7 @@ class SceneLog:
 
     def _camera_info(self, info: CameraInfo) -> None:
         if len(info.k) != 9:
-            raise images.ImageError(f"camera info k has {len(info.k)} numbers, not 9", "lens")
+            raise pictures.ImageError(f"camera info k has {len(info.k)} numbers, not 9", "lens")
         # The lens rarely changes: log it again only when it does, not five times a second.
         if info == self._last_info or (
             self._last_info is not None
@@ -269,7 +278,7 @@ class SceneLog:
         self.rec.log(
             f"{self._cam}/image",
             rr.Pinhole(
-                image_from_camera=np.asarray(info.k, dtype=np.float64).reshape(3, 3),
+                image_from_camera=pinhole_matrix(info.k),
                 resolution=[info.width, info.height],
                 camera_xyz=rr.ViewCoordinates.RDF,
                 image_plane_distance=IMAGE_PLANE_M,

@@ -1,0 +1,1 @@
+"""The perception maths: NumPy arrays in, small typed results out. No Zenoh, MuJoCo or MCAP."""

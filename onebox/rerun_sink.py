@@ -1,0 +1,161 @@
+"""Where a Rerun recording goes: a .rrd file, the native viewer, or the loopback web viewer.
+
+The SDK's own ``serve_web_viewer()`` binds every interface; the ``rerun`` executable that
+rerun-sdk ships can bind loopback only, so the web viewer runs as a child process of ours.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib.util
+import logging
+import os
+import shutil
+import socket
+import subprocess
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import rerun as rr
+
+from onebox import rerun_scene
+from onebox.errors import OneboxError
+
+log = logging.getLogger("viewer")
+
+APPLICATION_ID = "onebox"
+
+
+class ViewerError(OneboxError):
+    """The Rerun viewer could not be started or reached."""
+
+
+def has_display() -> bool:
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def rerun_executable() -> str:
+    """The ``rerun`` binary the rerun-sdk wheel ships (RERUN_CLI_PATH overrides it)."""
+    override = os.environ.get("RERUN_CLI_PATH")
+    if override:
+        return override
+    spec = importlib.util.find_spec("rerun_cli")
+    if spec is not None and spec.origin is not None:
+        bundled = Path(spec.origin).parent / "rerun"
+        if bundled.exists():
+            return str(bundled)
+    found = shutil.which("rerun")
+    if found is None:
+        raise ViewerError("no `rerun` executable: reinstall rerun-sdk (pip install rerun-sdk)")
+    return found
+
+
+def _port_free(port: int) -> bool:
+    with socket.socket() as s:
+        # As the server will: a port whose last connections linger in TIME_WAIT is free.
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError:
+            return False
+    return True
+
+
+def _wait_for_port(port: int, proc: subprocess.Popen[bytes], timeout_s: float) -> None:
+    deadline = time.monotonic() + timeout_s
+    while True:
+        with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", port), 0.2):
+            return
+        if proc.poll() is not None:
+            raise ViewerError(f"the Rerun web server exited with code {proc.returncode}")
+        if time.monotonic() > deadline:
+            raise ViewerError(f"the Rerun web server did not listen on 127.0.0.1:{port}")
+        time.sleep(0.05)  # polling a port that has no event to wait on
+
+
+@contextlib.contextmanager
+def web_server(grpc_port: int, web_port: int, memory_limit: str) -> Iterator[str]:
+    """A loopback-only ``rerun --serve-web`` child; yields the gRPC address to log to."""
+    for port, flag in ((grpc_port, "--grpc-port"), (web_port, "--web-port")):
+        if not _port_free(port):
+            raise ViewerError(
+                f"port {port} on 127.0.0.1 is taken (another viewer?): choose another with {flag}"
+            )
+    # The SDK's own serve_web_viewer() binds every interface; the CLI can bind loopback only.
+    cmd = [
+        rerun_executable(),
+        "--serve-web",
+        "--bind",
+        "127.0.0.1",
+        "--port",
+        str(grpc_port),
+        "--web-viewer-port",
+        str(web_port),
+        "--server-memory-limit",
+        memory_limit,
+    ]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        _wait_for_port(grpc_port, proc, timeout_s=20.0)
+        _wait_for_port(web_port, proc, timeout_s=20.0)
+        yield f"rerun+http://127.0.0.1:{grpc_port}/proxy"
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def web_address(grpc_port: int, web_port: int) -> str:
+    """The page to open: the web viewer, told where the data is."""
+    return f"http://127.0.0.1:{web_port}/?url=rerun%2Bhttp://127.0.0.1:{grpc_port}/proxy"
+
+
+@dataclass(frozen=True)
+class Sink:
+    """Where a recording goes: a .rrd file, the native viewer, or the loopback web viewer."""
+
+    save: Path | None = None
+    """Write a .rrd file here instead of showing anything."""
+    web: bool = False
+    """Serve the web viewer even when a display is there."""
+    camera: str = "camera"
+    grpc_port: int = 9876
+    web_port: int = 9090
+    memory_limit: str = "1GiB"
+
+
+@contextlib.contextmanager
+def open_recording(sink: Sink) -> Iterator[rr.RecordingStream]:
+    """A recording sent where ``sink`` says; a saved file is complete when the block ends."""
+    rec = rr.RecordingStream(APPLICATION_ID)
+    blueprint = rerun_scene.blueprint(sink.camera)
+    with contextlib.ExitStack() as stack:
+        if sink.save is not None:
+            sink.save.parent.mkdir(parents=True, exist_ok=True)
+            rec.save(sink.save, default_blueprint=blueprint)
+            print(f"viewer: writing {sink.save}", flush=True)
+        elif has_display() and not sink.web:
+            rec.spawn(port=sink.grpc_port, default_blueprint=blueprint)
+            print("viewer: opened the Rerun viewer", flush=True)
+        else:
+            url = stack.enter_context(web_server(sink.grpc_port, sink.web_port, sink.memory_limit))
+            rec.connect_grpc(url, default_blueprint=blueprint)
+            print(
+                f"viewer: no display; open {web_address(sink.grpc_port, sink.web_port)}",
+                flush=True,
+            )
+        # Leaving `with rec` flushes and finalizes the .rrd (writes its footer).
+        try:
+            with rec:
+                yield rec
+        except RuntimeError as e:
+            # honcho stops the whole process group at once, so the web server (our child) may
+            # be gone before the last flush; what was not sent had no one left to see it.
+            if sink.save is not None or "gRPC" not in str(e):
+                raise
+            log.info("the web viewer stopped first; nothing more to send")
