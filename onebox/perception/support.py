@@ -1,0 +1,292 @@
+"""The surface the boxes stand on: a robust plane fit to a depth picture.
+
+Contract: :func:`fit_support` takes a depth picture (float32 metres; NaN, 0, negative and inf
+are no reading), the lens and, when known, the camera's pose (optical frame -> world, 4 x 4),
+and returns the :class:`Support` plane or None when no plane holds enough readings.
+
+How:
+
+- A grid sample of at most ``SAMPLE_POINTS`` readings becomes optical-frame points.
+- RANSAC (all hypotheses evaluated at once, whole-array) with an inlier threshold that grows
+  with distance like stereo noise (sigma ~ z^2); then least squares on the inliers, the noise
+  estimated from their residuals (MAD), the inliers taken again at 3 sigma(z) and refitted.
+- With a pose only planes within ``max_tilt_deg`` of world up count; without one the largest
+  plane sets "up". Up to three planes are found in turn; among those holding at least
+  ``MIN_SHARE`` of the readings and facing the same way the LOWEST is the support (the floor
+  under a pallet, the table under the boxes; carton tops are never the support even when they
+  are the largest plane). What stands on a higher plateau (a pallet, a table seen with the floor
+  around it) is measured from that plateau by the box finder, not from the support.
+- ``table_z_m`` skips the fit: the support is the world plane z = table_z.
+
+The plane is ``normal . p + offset_m = 0`` with the normal pointing up, toward the camera, so
+``normal . p + offset_m`` is a point's height above the surface.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from onebox.geometry import Intrinsics
+
+Float32Array = npt.NDArray[np.float32]
+Float64Array = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.intp]
+
+SAMPLE_POINTS = 2400
+"""Readings the plane is fitted on: enough for a 0.1 % share to hold a couple of points."""
+HYPOTHESES = 64
+"""RANSAC planes tried per round; with half the readings on the plane, P(miss) ~ 1e-4."""
+MIN_SHARE = 0.10
+"""A plane holding less than this share of the readings is not a support candidate."""
+SIGMA_FLOOR_M = 0.0002
+"""The least noise assumed (float32 depth at a metre is good to ~0.1 micrometre; a renderer's
+depth to ~0.1 mm): thresholds never shrink below a few tenths of a millimetre."""
+
+
+@dataclass(frozen=True)
+class Support:
+    """The plane the boxes stand on: ``normal . p + offset_m = 0`` in ``frame``.
+
+    ``normal`` is unit length and points up, toward the camera; ``normal . p + offset_m`` is a
+    point's height above the plane. ``tilt_deg`` is the angle between the normal and world up
+    (None without a pose). ``sigma_m`` is the depth noise at ``distance_m`` (the median
+    distance of the plane's readings); noise elsewhere is taken to grow as distance squared.
+    ``normal_camera`` and ``offset_camera_m`` are the same plane in the optical frame.
+    """
+
+    normal: tuple[float, float, float]
+    offset_m: float
+    inlier_share: float
+    tilt_deg: float | None
+    frame: str
+    sigma_m: float = SIGMA_FLOOR_M
+    distance_m: float = 1.0
+    normal_camera: tuple[float, float, float] = (0.0, 0.0, -1.0)
+    offset_camera_m: float = 1.0
+
+    def sigma_at(self, depth_m: npt.NDArray[np.floating] | float) -> npt.NDArray[np.float32]:
+        """The depth noise expected at these distances, metres (never below the floor)."""
+        ratio = np.asarray(depth_m, dtype=np.float32) * np.float32(1.0 / self.distance_m)
+        result: npt.NDArray[np.float32] = np.maximum(
+            np.float32(self.sigma_m) * ratio * ratio, np.float32(SIGMA_FLOOR_M)
+        )
+        return result
+
+
+def _sample(depth_m: Float32Array, lens: Intrinsics) -> tuple[Float64Array, IntArray]:
+    """Optical-frame points of a grid sample of readings, and their flat pixel indices."""
+    height, width = depth_m.shape
+    stride = max(1, int(math.sqrt(height * width / SAMPLE_POINTS)))
+    grid = depth_m[stride // 2 :: stride, stride // 2 :: stride]
+    with np.errstate(invalid="ignore"):
+        ok = (grid > 0) & (grid < np.inf)
+    rows, cols = np.nonzero(ok)
+    rows = rows * stride + stride // 2
+    cols = cols * stride + stride // 2
+    across, down = lens.rays(width, height)
+    d = depth_m[rows, cols].astype(np.float64)
+    points = np.stack([across[cols] * d, down[rows] * d, d], axis=1)
+    return points, rows * width + cols
+
+
+def _initial_threshold(d: Float64Array, sigma_m: float | None) -> Float64Array:
+    if sigma_m is not None:
+        return np.full(d.shape, max(3.0 * sigma_m, 0.001))
+    # Unknown noise: generous enough for a stereo camera at 2 m, tight enough at 0.4 m that a
+    # 1 cm box is not on the plane.
+    result: Float64Array = 0.0015 + 0.004 * d * d
+    return result
+
+
+def _ransac(
+    points: Float64Array,
+    threshold: Float64Array,
+    up: Float64Array | None,
+    min_cos: float,
+    rng: np.random.Generator,
+) -> tuple[Float64Array, float] | None:
+    count = len(points)
+    if count < 3:
+        return None
+    picks = rng.integers(0, count, size=(HYPOTHESES, 3))
+    a, b, c = points[picks[:, 0]], points[picks[:, 1]], points[picks[:, 2]]
+    normals = np.cross(b - a, c - a)
+    length = np.linalg.norm(normals, axis=1)
+    good = length > 1e-12
+    normals = normals[good] / length[good, np.newaxis]
+    offsets = -np.einsum("ij,ij->i", normals, a[good])
+    flip = offsets < 0  # toward the camera: the camera (origin) is on the positive side
+    normals[flip] *= -1
+    offsets[flip] *= -1
+    if up is not None:
+        keep = normals @ up >= min_cos
+        normals, offsets = normals[keep], offsets[keep]
+    if len(normals) == 0:
+        return None
+    residual = np.abs(points @ normals.T + offsets)
+    votes = (residual < threshold[:, np.newaxis]).sum(axis=0)
+    best = int(votes.argmax())
+    return normals[best], float(offsets[best])
+
+
+def _least_squares(points: Float64Array) -> tuple[Float64Array, float, float]:
+    """The plane through points by least squares: normal toward the origin, offset, rms."""
+    centre = points.mean(axis=0)
+    moments = np.cov((points - centre).T)
+    values, vectors = np.linalg.eigh(moments)
+    normal = vectors[:, 0]
+    offset = -float(normal @ centre)
+    if offset < 0:
+        normal, offset = -normal, -offset
+    return normal, offset, math.sqrt(max(float(values[0]), 0.0))
+
+
+def _refine(
+    points: Float64Array,
+    inliers: npt.NDArray[np.bool_],
+    sigma_m: float | None,
+) -> tuple[Float64Array, float, float, float, npt.NDArray[np.bool_]]:
+    """Least squares, noise from the residuals, inliers again at 3 sigma(z), least squares."""
+    normal, offset, _ = _least_squares(points[inliers])
+    d = points[:, 2]
+    distance = float(np.median(d[inliers]))
+    for _ in range(2):
+        residual = points @ normal + offset
+        if sigma_m is None:
+            scaled = residual[inliers] / (d[inliers] / distance) ** 2
+            sigma = 1.4826 * float(np.median(np.abs(scaled - np.median(scaled))))
+            sigma = max(sigma, SIGMA_FLOOR_M)
+        else:
+            sigma = sigma_m
+        threshold = np.maximum(3.0 * sigma * (d / distance) ** 2, 3.0 * SIGMA_FLOOR_M)
+        if sigma_m is not None:
+            threshold = np.full(d.shape, max(3.0 * sigma_m, 3.0 * SIGMA_FLOOR_M))
+        new = np.abs(residual) < threshold
+        if new.sum() < 3:
+            break
+        inliers = new
+        normal, offset, _ = _least_squares(points[inliers])
+    return normal, offset, sigma, distance, inliers
+
+
+def _to_frame(
+    normal_c: Float64Array, offset_c: float, camera_to_world: Float64Array | None
+) -> tuple[tuple[float, float, float], float, float | None, str]:
+    if camera_to_world is None:
+        n = normal_c
+        return (float(n[0]), float(n[1]), float(n[2])), offset_c, None, "camera"
+    rotation = camera_to_world[:3, :3]
+    n_w = rotation @ normal_c
+    offset_w = offset_c - float(n_w @ camera_to_world[:3, 3])
+    tilt = math.degrees(math.acos(min(1.0, max(-1.0, float(n_w[2])))))
+    return (float(n_w[0]), float(n_w[1]), float(n_w[2])), offset_w, tilt, "world"
+
+
+def support_from_plane(
+    normal_c: Float64Array,
+    offset_c: float,
+    camera_to_world: Float64Array | None,
+    inlier_share: float,
+    sigma_m: float,
+    distance_m: float,
+) -> Support:
+    """A :class:`Support` from an optical-frame plane (normal toward the camera)."""
+    normal, offset, tilt, frame = _to_frame(normal_c, offset_c, camera_to_world)
+    return Support(
+        normal=normal,
+        offset_m=offset,
+        inlier_share=inlier_share,
+        tilt_deg=tilt,
+        frame=frame,
+        sigma_m=sigma_m,
+        distance_m=distance_m,
+        normal_camera=(float(normal_c[0]), float(normal_c[1]), float(normal_c[2])),
+        offset_camera_m=offset_c,
+    )
+
+
+def fit_support(
+    depth_m: Float32Array,
+    lens: Intrinsics,
+    camera_to_world: Float64Array | None,
+    *,
+    max_tilt_deg: float = 15.0,
+    noise_sigma_m: float | None = None,
+    table_z_m: float | None = None,
+    seed: int = 0,
+) -> Support | None:
+    """The support plane (see the module docstring), or None when no plane is found."""
+    points, _ = _sample(depth_m, lens)
+    if table_z_m is not None:
+        if camera_to_world is None:
+            raise ValueError("table_z_m needs the camera's pose (camera_to_world), got None")
+        rotation = camera_to_world[:3, :3]
+        normal_c = rotation.T @ np.array([0.0, 0.0, 1.0])
+        offset_c = float(camera_to_world[2, 3] - table_z_m)
+        if len(points) >= 3:
+            residual = points @ normal_c + offset_c
+            near = np.abs(residual) < _initial_threshold(points[:, 2], noise_sigma_m)
+            share = float(near.mean())
+            if near.sum() >= 3 and noise_sigma_m is None:
+                distance = float(np.median(points[near, 2]))
+                mad = float(np.median(np.abs(residual[near] - np.median(residual[near]))))
+                sigma = max(1.4826 * mad, SIGMA_FLOOR_M)
+            else:
+                distance, sigma = float(np.median(points[:, 2])), noise_sigma_m or SIGMA_FLOOR_M
+        else:
+            share, distance, sigma = 0.0, 1.0, noise_sigma_m or SIGMA_FLOOR_M
+        return support_from_plane(normal_c, offset_c, camera_to_world, share, sigma, distance)
+    if len(points) < 30:
+        return None
+    rng = np.random.default_rng(seed)
+    min_cos = math.cos(math.radians(max_tilt_deg))
+    up: Float64Array | None = None
+    if camera_to_world is not None:
+        up = camera_to_world[:3, :3].T @ np.array([0.0, 0.0, 1.0])
+    remaining = np.ones(len(points), dtype=bool)
+    candidates: list[tuple[Float64Array, float, float, float, float]] = []
+    for _ in range(3):
+        left = np.flatnonzero(remaining)
+        if len(left) < MIN_SHARE * len(points):
+            break
+        sub = points[left]
+        found = _ransac(sub, _initial_threshold(sub[:, 2], noise_sigma_m), up, min_cos, rng)
+        if found is None:
+            break
+        normal, offset = found
+        first = np.abs(sub @ normal + offset) < _initial_threshold(sub[:, 2], noise_sigma_m)
+        if first.sum() < MIN_SHARE * len(points):
+            break
+        normal, offset, sigma, distance, inliers = _refine(sub, first, noise_sigma_m)
+        share = float(inliers.sum()) / len(points)
+        if up is None:
+            up = normal  # without a pose the first (largest) plane says which way is up
+        if share >= MIN_SHARE and float(normal @ up) >= min_cos:
+            candidates.append((normal, offset, share, sigma, distance))
+        # Take out a wider band than the inliers, so the next round finds another plane.
+        wide = np.abs(sub @ normal + offset) < 2.0 * _initial_threshold(sub[:, 2], noise_sigma_m)
+        remaining[left[wide | inliers]] = False
+    if not candidates:
+        return None
+    assert up is not None
+    # The lowest: the plane farthest below the camera along "up".
+    normal, offset, share, sigma, distance = max(candidates, key=lambda c: c[1] * float(c[0] @ up))
+    return support_from_plane(normal, offset, camera_to_world, share, sigma, distance)
+
+
+def support_holds(
+    depth_m: Float32Array, lens: Intrinsics, support: Support, min_share_ratio: float = 0.6
+) -> bool:
+    """Whether a kept support still fits a new picture, checked on the grid sample (cheap)."""
+    points, _ = _sample(depth_m, lens)
+    if len(points) < 30:
+        return False
+    normal = np.asarray(support.normal_camera)
+    residual = np.abs(points @ normal + support.offset_camera_m)
+    sigma = support.sigma_at(points[:, 2]).astype(np.float64)
+    share = float((residual < np.maximum(3.0 * sigma, 3.0 * SIGMA_FLOOR_M)).mean())
+    return share >= min_share_ratio * support.inlier_share
