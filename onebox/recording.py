@@ -40,7 +40,8 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
 from onebox.errors import RecordingError
-from schemas import TYPES, Message, codec, json_schema, type_for_key, type_name
+from onebox.keys import TYPES, type_for_key
+from schemas import Message, codec, json_schema, type_name
 
 log = logging.getLogger("recording")
 

@@ -1,15 +1,20 @@
 """onebox's messages: msgspec structs, msgpack on the wire, field names as in the ROS messages."""
 
 from schemas.base import Header, Message
-from schemas.codec import TYPES, Codec, codec, json_schema, type_for_key, type_name
+from schemas.codec import Codec, codec, json_schema, type_name
 from schemas.geometry import Pose, Quaternion, TFMessage, Transform, TransformStamped, Vector3
 from schemas.sensor import FLOAT32, UINT32, CameraInfo, Image, PointCloud, PointField
 from schemas.sim import Clock, GroundTruth
-from schemas.vision import BoundingBox3D, Detection3D, Detection3DArray, ObjectHypothesis
+from schemas.vision import (
+    BoundingBox3D,
+    Detection3D,
+    Detection3DArray,
+    ObjectHypothesis,
+    SupportPlane,
+)
 
 __all__ = [
     "FLOAT32",
-    "TYPES",
     "UINT32",
     "BoundingBox3D",
     "CameraInfo",
@@ -26,12 +31,12 @@ __all__ = [
     "PointField",
     "Pose",
     "Quaternion",
+    "SupportPlane",
     "TFMessage",
     "Transform",
     "TransformStamped",
     "Vector3",
     "codec",
     "json_schema",
-    "type_for_key",
     "type_name",
 ]

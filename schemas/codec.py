@@ -1,7 +1,6 @@
 """msgpack on the wire: one Encoder and one typed Decoder per message type, made once.
 
-``TYPES`` says which type travels on which key (without the namespace prefix); the recorder,
-``onebox info`` and ``onebox check`` use it to name and describe what they see.
+Which type travels on which key is :mod:`onebox.keys`.
 """
 
 from __future__ import annotations
@@ -13,10 +12,6 @@ from typing import Any, Generic, TypeVar
 import msgspec
 
 from schemas.base import Message
-from schemas.geometry import TFMessage, TransformStamped
-from schemas.sensor import CameraInfo, Image, PointCloud
-from schemas.sim import Clock, GroundTruth
-from schemas.vision import Detection3DArray
 
 M = TypeVar("M", bound=Message)
 
@@ -57,27 +52,3 @@ def json_schema(message_type: type[Message]) -> bytes:
     schema: dict[str, Any] = msgspec.json.schema(message_type)
     schema["title"] = type_name(message_type)
     return json.dumps(schema, sort_keys=True).encode()
-
-
-TYPES: dict[str, type[Message]] = {
-    "camera/image_raw": Image,
-    "camera/depth/image_raw": Image,
-    "camera/camera_info": CameraInfo,
-    "camera/pose": TransformStamped,
-    "camera/points": PointCloud,
-    "basic_camera/image_raw": Image,
-    "basic_camera/depth/image_raw": Image,
-    "basic_camera/camera_info": CameraInfo,
-    "basic_camera/pose": TransformStamped,
-    "tf_static": TFMessage,
-    "clock": Clock,
-    "detections": Detection3DArray,
-    "sim/ground_truth": GroundTruth,
-}
-"""The pipeline's keys, without namespace, and the type each carries."""
-
-
-def type_for_key(key: str, namespace: str = "") -> type[Message] | None:
-    """The type a key carries, or None for a key that is not the pipeline's."""
-    prefix = f"{namespace.strip('/')}/" if namespace else ""
-    return TYPES.get(key.removeprefix(prefix))

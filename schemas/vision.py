@@ -32,3 +32,20 @@ class Detection3DArray(Message, frozen=True, kw_only=True):
 
     header: Header = Header()
     detections: list[Detection3D] = []
+
+
+class SupportPlane(Message, frozen=True, kw_only=True):
+    """The surface the boxes stand on, as the locator found it: the plane n . p + offset_m = 0.
+
+    ``header.frame_id`` is the world frame, or the camera's optical frame when no pose is known.
+    ``normal`` is a unit vector pointing up, away from the surface (towards the camera).
+    """
+
+    header: Header = Header()
+    normal: Vector3 = Vector3(z=1.0)
+    offset_m: float = 0.0
+    """n . p + offset_m = 0 for every point p on the plane: -offset_m is its height along n."""
+    inlier_share: float = 0.0
+    """The share of the readings the plane was fitted to that lie on it, 0 to 1."""
+    tilt_deg: float | None = None
+    """How far the normal is from the world's up, degrees; None in the camera's frame."""

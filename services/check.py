@@ -31,7 +31,8 @@ import msgspec
 
 from onebox import bus
 from onebox.errors import BusError, NothingArrived
-from schemas import CameraInfo, Detection3DArray, Image, Message, PointCloud, codec, type_for_key
+from onebox.keys import type_for_key
+from schemas import CameraInfo, Detection3DArray, Image, Message, PointCloud, codec
 from schemas import type_name as schema_type_name
 
 log = logging.getLogger("check")

@@ -32,8 +32,9 @@ import zenoh
 
 from onebox import bus
 from onebox.errors import RecordingError
+from onebox.keys import type_for_key
 from onebox.recording import TYPES_BY_NAME, Recorded, describe, has_header, iter_messages
-from schemas import Clock, Message, codec, type_for_key
+from schemas import Clock, Message, codec
 
 log = logging.getLogger("replay")
 

@@ -25,8 +25,9 @@ import msgspec
 
 from onebox import recording, rerun_scene, rerun_sink, settings, sync
 from onebox.errors import RecordingError
+from onebox.keys import type_for_key
 from onebox.pictures import ImageError
-from schemas import codec, type_for_key
+from schemas import codec
 
 log = logging.getLogger("view")
 

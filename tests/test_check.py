@@ -5,10 +5,11 @@ from __future__ import annotations
 import subprocess
 import sys
 
+from onebox.keys import TYPES
 from onebox.recording import describe
 from onebox.testing.fake_capture import write_mcap
 from onebox.testing.processes import CAPTURE, ROOT, free_port
-from schemas import TYPES, CameraInfo, Header, Image
+from schemas import CameraInfo, Header, Image
 from services import check
 
 

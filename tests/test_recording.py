@@ -17,6 +17,7 @@ import zenoh
 from mcap.reader import make_reader
 
 from onebox.errors import RecordingError
+from onebox.keys import type_for_key
 from onebox.recording import RecordingWriter, describe, iter_messages, read_capture
 from onebox.testing.capture import CAPTURE, load_capture
 from onebox.testing.processes import ROOT, Inbox, has_key
@@ -30,7 +31,6 @@ from schemas import (
     TransformStamped,
     Vector3,
     codec,
-    type_for_key,
 )
 
 # --- messages the tests publish -----------------------------------------------------------------

@@ -7,8 +7,8 @@ import json
 import msgspec
 import pytest
 
+from onebox.keys import TYPES
 from schemas import (
-    TYPES,
     BoundingBox3D,
     CameraInfo,
     Clock,

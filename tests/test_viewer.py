@@ -12,10 +12,11 @@ import pytest
 import rerun as rr
 
 from onebox import rerun_scene
+from onebox.keys import type_for_key
 from onebox.testing.fake_capture import BOX_CENTRE, BOX_SIZE, capture, tf_static, write_mcap
 from onebox.testing.processes import CAPTURE, ROOT, free_port, honcho_env, wait_for_output
 from onebox.testing.rrd import contents
-from schemas import Detection3DArray, Image, TFMessage, codec, type_for_key
+from schemas import Detection3DArray, Image, TFMessage, codec
 
 
 def publish_until_exit(test_bus, proc: subprocess.Popen[str], camera: str = "camera") -> None:
