@@ -139,6 +139,8 @@ class _Plateau:
     normal_c: Float64Array | None = None
     base_m: float = 0.0
     on_plateau: int | None = None
+    window: tuple[slice, slice] = (slice(0, 0), slice(0, 0))
+    """The piece's rows and columns in the crop (for the curvature test)."""
 
 
 @functools.lru_cache(maxsize=8)
@@ -304,7 +306,7 @@ def _top(
         return None
     lab_top[win][top] = label
     r0, c0 = place
-    return _Plateau(label, top_height, tol, r + a0 + r0, c + b0 + c0)
+    return _Plateau(label, top_height, tol, r + a0 + r0, c + b0 + c0, window=win)
 
 
 def _measure(
@@ -339,7 +341,11 @@ def _measure(
     c0 = int(p.cols.min())
     mask = np.zeros((int(p.rows.max()) - r0 + 3, int(p.cols.max()) - c0 + 3), dtype=bool)
     mask[p.rows - r0 + 1, p.cols - c0 + 1] = True
-    inner = ndimage.binary_erosion(mask, CROSS)
+    # Holes inside a top (noise, or a box standing on it) are not its outline, and a box
+    # standing on it hides part of its area.
+    filled = ndimage.binary_fill_holes(mask)
+    inner = ndimage.binary_erosion(filled, CROSS)
+    area += float(np.count_nonzero(filled & ~mask)) * float(np.median(pixel_area))
     outline = mask[p.rows - r0 + 1, p.cols - c0 + 1] & ~inner[p.rows - r0 + 1, p.cols - c0 + 1]
     hidden = np.zeros(len(d), dtype=bool)
     cut_off = False
@@ -357,11 +363,16 @@ def _measure(
         return
     basis = _plane_basis(support, None)
     flat = np.stack([pts @ basis[0], pts @ basis[1]], axis=1)
-    rect = fit_rectangle(flat, outline, hidden, pixel_area)
+    rect = fit_rectangle(flat, outline, hidden, pixel_area, area)
     if rect is None or rect.length_m <= 0 or rect.width_m <= 0:
         return
     p.rect = rect
-    rect_area = rect.length_m * rect.width_m
+    # The fill is taken against the extreme pixels (plus a footprint), not the fitted sides: a
+    # disc's sides fitted by medians would hug it.
+    footprint = math.sqrt(float(np.median(pixel_area)))
+    ax = np.asarray(rect.axis)
+    perp = np.array([-ax[1], ax[0]])
+    rect_area = (np.ptp(flat @ ax) + footprint) * (np.ptp(flat @ perp) + footprint)
     fill = min(area / rect_area, 1.0)
     flatness = max(0.0, 1.0 - max(rms - 1.5 * p.tolerance_m / 3.0, 0.0) / p.tolerance_m)
     p.score = fill * flatness
@@ -369,15 +380,10 @@ def _measure(
     if tilt > settings.max_top_tilt_deg or p.score < settings.min_score:
         return
     # Curved tops widen when the tolerance is loosened; a box's sides drop straight down.
-    win_r = slice(
-        max(int(p.rows.min()) - 2 - crop[0].start, 0), int(p.rows.max()) + 3 - crop[0].start
-    )
-    win_c = slice(
-        max(int(p.cols.min()) - 2 - crop[1].start, 0), int(p.cols.max()) + 3 - crop[1].start
-    )
+    win_r, win_c = p.window
     with np.errstate(invalid="ignore"):
-        loose = (labels[win_r, win_c] == p.label) & (
-            h[win_r, win_c] > np.float32(p.height_m - 4.0 * p.tolerance_m)
+        loose = (labels[p.window] == p.label) & (
+            h[p.window] > np.float32(p.height_m - 4.0 * p.tolerance_m)
         )
     lr, lc = np.nonzero(loose)
     lr = lr + win_r.start + crop[0].start
@@ -385,8 +391,6 @@ def _measure(
     if len(lr) > len(d):
         dl = depth[lr, lc].astype(np.float64)
         lp = np.stack([across[lc] * dl, down[lr] * dl, dl], axis=1)
-        ax = np.asarray(rect.axis)
-        perp = np.array([-ax[1], ax[0]])
         loose_flat = np.stack([lp @ basis[0], lp @ basis[1]], axis=1)
         growth = (_spread(loose_flat @ ax) * _spread(loose_flat @ perp)) / max(
             _spread(flat @ ax) * _spread(flat @ perp), 1e-12

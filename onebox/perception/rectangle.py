@@ -2,7 +2,8 @@
 
 Contract: :func:`fit_rectangle` takes the top's pixel centres as 2-D points in the support
 plane (metres), which of them lie on the top's outline (and which of those are hidden edges,
-where something nearer occludes the top), each pixel's footprint area on the top and returns a
+where something nearer occludes the top), each pixel's footprint area on the top (and
+optionally the top's whole area, when something standing on it hides part) and returns a
 :class:`Rectangle`, or None for fewer than three distinct points.
 
 - The smallest-area rectangle around the outline's convex hull (rotating calipers) gives a
@@ -123,6 +124,7 @@ def fit_rectangle(
     outline: BoolArray,
     hidden: BoolArray,
     pixel_area_m2: Float64Array,
+    area_m2: float | None = None,
 ) -> Rectangle | None:
     """The top's rectangle (see the module docstring)."""
     edge = points[outline]
@@ -154,7 +156,7 @@ def fit_rectangle(
             hidden_sides += 1
     length0 = position[0] - position[2]
     width0 = position[1] - position[3]
-    area = float(pixel_area_m2.sum())
+    area = float(pixel_area_m2.sum()) if area_m2 is None else area_m2
     if hidden_sides == 0 and length0 > 0 and width0 > 0:
         total = length0 + width0
         margin = 0.5 * (-total + math.sqrt(max(total * total - 4 * (length0 * width0 - area), 0)))

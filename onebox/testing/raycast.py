@@ -27,13 +27,13 @@ Vec3 = tuple[float, float, float]
 Rgb = tuple[int, int, int]
 
 
-def _unit(v: Sequence[float]) -> Float64Array:
+def _unit(v: Sequence[float] | npt.NDArray[np.floating]) -> Float64Array:
     a = np.asarray(v, dtype=np.float64)
     result: Float64Array = a / np.linalg.norm(a)
     return result
 
 
-def frame_from_normal(normal: Sequence[float], yaw_deg: float = 0.0) -> Float64Array:
+def frame_from_normal(normal: Sequence[float] | Float64Array, yaw_deg: float = 0.0) -> Float64Array:
     """A rotation whose z column is ``normal`` and whose x column is turned ``yaw_deg`` about it.
 
     Yaw 0 puts x as close to world +x as the normal allows (world +y when the normal is +x).

@@ -1,0 +1,233 @@
+"""The box finder on ray-cast pictures whose answers are known exactly."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from onebox.perception.boxes import BoxFinder, FinderSettings, find_boxes
+from onebox.perception.support import fit_support
+from onebox.testing.raycast import (
+    Box,
+    Camera,
+    Cylinder,
+    Noise,
+    Plane,
+    Scene,
+    Sphere,
+    add_noise,
+    box_on,
+    render,
+)
+
+
+def random_boxes(rng: np.random.Generator, count: int, spread_m: float) -> tuple[Box, ...]:
+    """Up to ``count`` boxes scattered without overlap inside +-spread_m of the origin."""
+    boxes: list[Box] = []
+    for _ in range(count * 20):
+        if len(boxes) == count:
+            break
+        size = (
+            float(rng.uniform(0.05, 0.14)),
+            float(rng.uniform(0.04, 0.1)),
+            float(rng.uniform(0.02, 0.1)),
+        )
+        x, y = rng.uniform(-spread_m, spread_m, 2)
+        radius = math.hypot(size[0], size[1]) / 2
+        if any(
+            math.hypot(x - b.centre[0], y - b.centre[1])
+            < radius + math.hypot(b.size[0], b.size[1]) / 2 + 0.01
+            for b in boxes
+        ):
+            continue
+        colour = tuple(int(v) for v in rng.integers(60, 230, 3))
+        boxes.append(
+            box_on(Plane(), float(x), float(y), size, float(rng.uniform(-90, 90)), colour)  # type: ignore[arg-type]
+        )
+    return tuple(boxes)
+
+
+def yaw_error_deg(found: float, truth: float, square: bool) -> float:
+    """Angle between two yaws, modulo 180 degrees (90 for a square top)."""
+    period = 90.0 if square else 180.0
+    diff = (found - truth) % period
+    return min(diff, period - diff)
+
+
+def match(found, truth: tuple[Box, ...]):
+    """Pairs of (found box, true box) by nearest top middle."""
+    pairs = []
+    for box in truth:
+        best = min(found, key=lambda f: math.dist(f.top_middle, box.top_middle))
+        pairs.append((best, box))
+    return pairs
+
+
+def test_seed_world_cube_middle_and_height():
+    """The seed's 6 cm cube at (0.065, 0.040): middle within 1 mm, height 0.060 m."""
+    camera = Camera.looking_at((0, 0, 0.4), (0, 0, 0), 320, 240, 60)
+    scene = Scene(camera, Plane(), (box_on(Plane(), 0.065, 0.040, (0.06, 0.06, 0.06)),))
+    depth, _ = render(scene)
+    found = find_boxes(depth, camera.lens, camera.camera_to_world)
+    assert len(found.boxes) == 1
+    box = found.boxes[0]
+    assert abs(box.top_middle[0] - 0.065) <= 0.001
+    assert abs(box.top_middle[1] - 0.040) <= 0.001
+    assert box.size[2] == pytest.approx(0.060, abs=0.0005)
+    assert box.size[0] == pytest.approx(0.060, abs=0.002)
+    assert box.centre[2] == pytest.approx(0.030, abs=0.0005)
+
+
+@pytest.mark.parametrize(
+    ("seed", "count", "distance_m", "tilt_deg"),
+    [(1, 1, 0.4, 0.0), (2, 3, 0.5, 15.0), (3, 5, 0.8, 30.0), (4, 8, 1.2, 20.0), (5, 4, 2.0, 10.0)],
+)
+def test_noise_free_boxes_found_exactly(seed, count, distance_m, tilt_deg):
+    """Noise-free: every box found, none extra, centre/yaw/size/height within the targets."""
+    rng = np.random.default_rng(seed)
+    spread = 0.12 * distance_m / 0.4 * 0.6
+    truth = random_boxes(rng, count, spread)
+    camera = Camera.tilted(distance_m, tilt_deg, width=640, height=480, hfov_deg=60)
+    depth, colour = render(Scene(camera, Plane(), truth))
+    found = find_boxes(depth, camera.lens, camera.camera_to_world, colour)
+    assert len(found.boxes) == len(truth)
+    scale = distance_m / 0.4
+    for box, true in match(found.boxes, truth):
+        assert math.dist(box.centre, true.centre) <= 0.0025 * distance_m * 1.5
+        square = abs(true.size[0] - true.size[1]) < 0.01
+        assert yaw_error_deg(box.yaw_deg, true.yaw_deg(), square) <= 1.0
+        assert abs(box.size[0] - max(true.size[:2])) <= 0.002 * scale
+        assert abs(box.size[1] - min(true.size[:2])) <= 0.002 * scale
+        assert abs(box.size[2] - true.size[2]) <= 0.001
+
+
+def test_sigma_1mm_accuracy():
+    """Gaussian 1 mm noise at 0.5 m: centres within 3 mm, sizes within 4 mm, yaw within 2 deg."""
+    rng = np.random.default_rng(7)
+    truth = random_boxes(rng, 5, 0.12)
+    camera = Camera.tilted(0.5, 20.0, width=640, height=480)
+    depth, colour = render(Scene(camera, Plane(), truth))
+    noisy = add_noise(depth, Noise(sigma_m=0.001), rng)
+    found = find_boxes(noisy, camera.lens, camera.camera_to_world, colour)
+    assert len(found.boxes) == len(truth)
+    centre_errors = []
+    for box, true in match(found.boxes, truth):
+        centre_errors.append(math.dist(box.centre, true.centre))
+        square = abs(true.size[0] - true.size[1]) < 0.01
+        assert yaw_error_deg(box.yaw_deg, true.yaw_deg(), square) <= 2.0
+        assert abs(box.size[0] - max(true.size[:2])) <= 0.004
+        assert abs(box.size[1] - min(true.size[:2])) <= 0.004
+        assert abs(box.size[2] - true.size[2]) <= 0.002
+    assert max(centre_errors) <= 0.003
+    assert float(np.median(centre_errors)) <= 0.0015
+
+
+@pytest.mark.parametrize(
+    "thing",
+    [
+        Cylinder((0.0, 0.0, 0.06), 0.04, 0.12),
+        Sphere((0.0, 0.0, 0.05), 0.05),
+        Cylinder((0.0, 0.0, 0.035), 0.035, 0.2, ((1, 0, 0), (0, 0, -1), (0, 1, 0))),
+    ],
+    ids=["upright cylinder", "sphere", "lying cylinder"],
+)
+def test_round_things_are_not_boxes(thing):
+    """A cylinder (upright or lying) or a ball next to a box: only the box is reported."""
+    box = box_on(Plane(), 0.12, 0.05, (0.08, 0.06, 0.05), 30.0)
+    camera = Camera.tilted(0.5, 15.0, width=640, height=480)
+    depth, colour = render(Scene(camera, Plane(), (box, thing)))
+    found = find_boxes(depth, camera.lens, camera.camera_to_world, colour)
+    assert len(found.boxes) == 1
+    assert math.dist(found.boxes[0].centre, box.centre) < 0.002
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_no_box_on_an_empty_noisy_table(seed):
+    """Empty table, sigma 3 mm plus Kinect-like speckles, holes and mm steps: no box at all."""
+    rng = np.random.default_rng(100 + seed)
+    camera = Camera.tilted(float(rng.uniform(0.5, 1.5)), float(rng.uniform(0, 30)), width=320)
+    depth, _ = render(Scene(camera, Plane()))
+    noise = Noise(sigma_m=0.003, quantum_m=0.001, speckle_share=0.003, speckle_clump_px=3)
+    found = find_boxes(add_noise(depth, noise, rng), camera.lens, camera.camera_to_world)
+    assert found.support is not None
+    assert found.boxes == []
+
+
+def test_stacked_box_reports_what_it_stands_on():
+    """A box on a box: two boxes, the upper one `on` the lower, its own height."""
+    lower = box_on(Plane(), 0.0, 0.0, (0.2, 0.15, 0.08), 10.0)
+    upper = box_on(lower, 0.02, -0.01, (0.1, 0.07, 0.05), 25.0, colour=(40, 90, 200))
+    camera = Camera.tilted(0.7, 20.0, width=640, height=480)
+    depth, colour = render(Scene(camera, Plane(), (lower, upper)))
+    found = find_boxes(depth, camera.lens, camera.camera_to_world, colour)
+    assert len(found.boxes) == 2
+    top, bottom = found.boxes
+    assert top.on == 1 and bottom.on is None
+    assert top.size[2] == pytest.approx(0.05, abs=0.001)
+    assert bottom.size[2] == pytest.approx(0.08, abs=0.001)
+    assert math.dist(top.centre, upper.centre) < 0.002
+
+
+def test_touching_cartons_split_by_colour():
+    """Two touching cartons of one height: one merged box from depth alone, two with colour."""
+    plane = Plane()
+    a = box_on(plane, -0.05, 0.0, (0.1, 0.08, 0.06), 0.0, colour=(180, 140, 90))
+    b = box_on(plane, 0.05, 0.0, (0.1, 0.08, 0.06), 0.0, colour=(150, 115, 70))
+    camera = Camera.tilted(0.6, 10.0, width=640, height=480)
+    depth, colour = render(Scene(camera, plane, (a, b)))
+    assert len(find_boxes(depth, camera.lens, camera.camera_to_world).boxes) == 1
+    found = find_boxes(depth, camera.lens, camera.camera_to_world, colour)
+    assert len(found.boxes) == 2
+    for box, true in match(found.boxes, (a, b)):
+        assert math.dist(box.centre, true.centre) < 0.003
+        assert box.size[0] == pytest.approx(0.1, abs=0.004)
+
+
+@pytest.mark.parametrize("tilt_deg", [0.0, 25.0])
+def test_without_pose_sizes_match(tilt_deg):
+    """No pose: the camera-frame answer has the same sizes, and the support faces the camera."""
+    box = box_on(Plane(), 0.03, 0.02, (0.1, 0.06, 0.04), 40.0)
+    camera = Camera.tilted(0.5, tilt_deg, width=640, height=480)
+    depth, _ = render(Scene(camera, Plane(), (box,)))
+    found = find_boxes(depth, camera.lens, None)
+    assert found.frame == "camera" and found.support is not None
+    assert found.support.offset_m == pytest.approx(0.5, abs=0.001)
+    (only,) = found.boxes
+    assert only.size == pytest.approx((0.1, 0.06, 0.04), abs=0.0015)
+    centre_world = camera.camera_to_world[:3, :3] @ only.centre + camera.camera_to_world[:3, 3]
+    assert math.dist(centre_world, box.centre) < 0.0015
+
+
+def test_support_is_the_floor_under_a_raised_table_slant():
+    """A slanted floor 5 degrees off: the fit finds it and reports the tilt."""
+    plane = Plane((0.0, 0.0, 0.1), (math.sin(math.radians(5)), 0.0, math.cos(math.radians(5))))
+    camera = Camera.tilted(0.6, 10.0, target=(0, 0, 0.1), width=320)
+    depth, _ = render(Scene(camera, plane))
+    support = fit_support(depth, camera.lens, camera.camera_to_world)
+    assert support is not None and support.tilt_deg == pytest.approx(5.0, abs=0.05)
+    assert support.normal[0] * 0.0 + support.normal[2] * 0.1 + support.offset_m == pytest.approx(
+        0.0, abs=1e-4
+    )
+
+
+def test_box_finder_keeps_support_and_ids():
+    """A still camera: one plane fit for the stream, the same ids while the boxes stay."""
+    rng = np.random.default_rng(11)
+    truth = random_boxes(rng, 3, 0.1)
+    camera = Camera.tilted(0.5, 15.0, width=320)
+    depth, _ = render(Scene(camera, Plane(), truth))
+    finder = BoxFinder(FinderSettings())
+    first = finder(
+        add_noise(depth, Noise(sigma_m=0.0005), rng), camera.lens, camera.camera_to_world
+    )
+    second = finder(
+        add_noise(depth, Noise(sigma_m=0.0005), rng), camera.lens, camera.camera_to_world
+    )
+    assert finder.refits == 1
+    assert len(first.boxes) == 3
+    ids = {b.id: b.centre for b in first.boxes}
+    assert sorted(ids) == [0, 1, 2]
+    for box in second.boxes:
+        assert math.dist(ids[box.id], box.centre) < 0.003
