@@ -109,7 +109,8 @@ def report(name: str, found, truth) -> None:
     extra = len(found.boxes) - (len(truth) - missing)
     print(
         f"{name:<34} found {len(truth) - missing}/{len(truth)}, extra {extra}, centre worst "
-        f"{1e3 * max(errors_c, default=0):.1f} mm, size worst {1e3 * max(errors_s, default=0):.1f} mm"
+        f"{1e3 * max(errors_c, default=0):.1f} mm, "
+        f"size worst {1e3 * max(errors_s, default=0):.1f} mm"
     )
 
 
