@@ -103,42 +103,69 @@ def matrix_of(transform: TransformStamped) -> Float64Array:
         ) from e
 
 
-class FrameTree:
-    """Frames joined by transforms; each frame has at most one parent, as in tf2."""
+MAX_FRAMES = 65_536
+"""The most frames a tree holds: a stranger naming new frames forever cannot grow it further."""
 
-    def __init__(self, transforms: Iterable[TransformStamped] = ()) -> None:
+
+class FrameTree:
+    """Frames joined by transforms; each frame has at most one parent, as in tf2's tf_static.
+
+    A newer transform for a child frame replaces the older one. A message (a list of
+    transforms, as one ``tf_static`` sample carries) is checked whole before any of it is used
+    and then applied at once: if one transform in it is unusable, would close a loop, or would
+    give a ``root`` frame (the world) a parent, the whole message is refused and the tree is
+    left as it was.
+    """
+
+    def __init__(
+        self, transforms: Iterable[TransformStamped] = (), *, roots: Iterable[str] = ()
+    ) -> None:
         self._parent: dict[str, tuple[str, Float64Array]] = {}
+        self.roots = frozenset(roots)
+        """Frames that stay roots: a transform that gives one a parent is refused."""
         self.version = 0
         """Counts changes, so a caller can cache a lookup until the tree changes."""
         self.add_all(transforms)
 
     def add(self, transform: TransformStamped) -> None:
         """Put ``child`` under ``parent`` (replacing where it was). Raises FrameError."""
-        parent, child = transform.header.frame_id, transform.child_frame_id
-        if not parent or not child or parent == child:
-            raise FrameError(
-                f"a transform needs two different frame names, got parent {parent!r} and "
-                f"child {child!r}"
-            )
-        matrix = matrix_of(transform)
-        # A transform that closes a loop would make the tree a graph with two answers.
-        ancestor: str | None = parent
-        while ancestor is not None:
-            if ancestor == child:
-                raise FrameError(f"{parent} -> {child} would make {child} its own ancestor")
-            ancestor = self._parent[ancestor][0] if ancestor in self._parent else None
-        self._parent[child] = (parent, matrix)
-        self.version += 1
+        self.add_all([transform])
 
-    def add_all(self, transforms: Iterable[TransformStamped]) -> None:
-        """Add each transform; raises FrameError at the first that cannot be used."""
+    def add_all(self, transforms: Iterable[TransformStamped]) -> list[str]:
+        """Apply one message's transforms, all or none; returns the child frames it set.
+
+        Raises FrameError (and changes nothing) when any transform cannot be used.
+        """
+        changes: dict[str, tuple[str, Float64Array]] = {}
         for transform in transforms:
-            self.add(transform)
+            parent, child = transform.header.frame_id, transform.child_frame_id
+            if not parent or not child or parent == child:
+                raise FrameError(
+                    f"a transform needs two different frame names, got parent {parent!r} and "
+                    f"child {child!r}"
+                )
+            if child in self.roots:
+                raise FrameError(
+                    f"{parent} -> {child} would give {child} a parent, but {child} is the "
+                    "root of the tree"
+                )
+            changes[child] = (parent, matrix_of(transform))
+        if not changes:
+            return []
+        merged = {**self._parent, **changes}
+        if len(merged) > MAX_FRAMES:
+            raise FrameError(
+                f"the message would make the tree {len(merged):,} frames, more than {MAX_FRAMES:,}"
+            )
+        _refuse_loops(merged, changes)
+        self._parent = merged
+        self.version += 1
+        return list(changes)
 
     @property
     def frames(self) -> set[str]:
-        """Every frame named so far."""
-        return set(self._parent) | {parent for parent, _ in self._parent.values()}
+        """Every frame named so far, and the roots."""
+        return set(self._parent) | {parent for parent, _ in self._parent.values()} | self.roots
 
     def _to_root(self, frame: str) -> tuple[str, Float64Array]:
         """The root of ``frame``'s tree and the matrix ``root <- frame``."""
@@ -170,3 +197,24 @@ class FrameTree:
         # Up from the child to the root, then down to the parent.
         result: Float64Array = np.linalg.inv(root_from_parent) @ root_from_child
         return result
+
+
+def _refuse_loops(parents: dict[str, tuple[str, Float64Array]], changed: Iterable[str]) -> None:
+    """Raise FrameError if walking up from any changed frame comes back to a frame on its way.
+
+    Each frame is walked at most once, so a chain of N frames costs N steps, not N squared.
+    """
+    settled: set[str] = set()
+    for start in changed:
+        path: list[str] = []
+        on_path: set[str] = set()
+        frame: str | None = start
+        while frame is not None and frame not in settled:
+            if frame in on_path:
+                loop = path[path.index(frame) :]
+                shown = " -> ".join(reversed([*loop, frame][-12:]))
+                raise FrameError(f"the transforms would make {frame} its own ancestor ({shown})")
+            path.append(frame)
+            on_path.add(frame)
+            frame = parents[frame][0] if frame in parents else None
+        settled.update(path)
