@@ -10,6 +10,15 @@
   worker is slow the oldest item is dropped, counted, and the newest kept.
 - ``latched=True`` publishers keep their last sample in a Zenoh publication cache and
   ``history=True`` subscribers ask for it, so a late joiner still receives ``tf_static``.
+- Quality of service follows the message type (:func:`qos`): a picture (Image, PointCloud) is
+  worth nothing late, so it is dropped under congestion, sent at once and at low priority;
+  everything else (detections, tf_static, clock, camera info, ...) is small and blocks rather
+  than drops. config/router.json5 bounds how long a stalled link may block the router.
+- A namespace is a plain key prefix (:func:`check_namespace`); a sample on a wildcard key is
+  logged and dropped, never delivered as if it were on the subscribed key.
+- Every process logs losing and regaining its router (:class:`RouterWatch`).
+- ``--secure DIR`` (or ``ONEBOX_SECURE``) opens the session with config/secure/ and the
+  process's own certificate from DIR (made by ``onebox certs DIR``).
 """
 
 from __future__ import annotations
@@ -31,9 +40,9 @@ import zenoh
 import zenoh.ext
 
 from onebox import settings
-from onebox.errors import BusError
+from onebox.errors import BusError, SettingError
 from onebox.sync import ReportLimiter
-from schemas import Message, codec
+from schemas import Image, Message, PointCloud, codec
 
 log = logging.getLogger("bus")
 
@@ -42,6 +51,10 @@ T = TypeVar("T")
 
 CLIENT_CONFIG = settings.CONFIG_DIR / "client.json5"
 ROUTER_CONFIG = settings.CONFIG_DIR / "router.json5"
+SECURE_DIR = settings.CONFIG_DIR / "secure"
+SECURE_CLIENT_CONFIG = SECURE_DIR / "client.json5"
+SECURE_ROUTER_CONFIG = SECURE_DIR / "router.json5"
+SECURE_ENDPOINT = "tls/localhost:7447"
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 ROUTER_ENV = "ONEBOX_ROUTER"
 """An environment variable naming the local router's endpoint: the router listens there and
@@ -74,17 +87,101 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help=f"a Zenoh JSON5 configuration to start from (default {CLIENT_CONFIG.name} in config/)",
     )
     settings.add(
-        group, "namespace", "", "prefix for every key: robot1 gives robot1/camera/image_raw"
+        group,
+        "namespace",
+        "",
+        "prefix for every key: robot1 gives robot1/camera/image_raw (a plain key prefix: no "
+        "wildcards, no empty or leading or trailing '/')",
+        kind=check_namespace,
     )
+    group.add_argument(
+        "--secure",
+        type=Path,
+        metavar="DIR",
+        default=os.environ.get(SECURE_ENV) or None,
+        help=f"open the secured configuration (config/secure/: TLS, access control) with this "
+        f"process's certificate from DIR, made by `onebox certs DIR` (default ${SECURE_ENV})",
+    )
+    # The process's identity in a secured deployment: its command's name (`onebox sim` is sim),
+    # the common name of its certificate, which the router's access control knows it by.
+    parser.set_defaults(identity=parser.prog.split()[-1])
+
+
+SECURE_ENV = "ONEBOX_SECURE"
+"""An environment variable naming the certificate folder: ``ONEBOX_SECURE=certs honcho start``
+runs the whole pipeline with TLS, one identity a process, and access control."""
+
+NAMESPACE_HINT = "a namespace is a plain key prefix such as robot1 or site/robot1"
+
+
+def check_namespace(namespace: str) -> str:
+    """``namespace`` if it is a plain key prefix; otherwise a SettingError saying what is wrong."""
+    if not namespace:
+        return ""
+    if namespace.startswith("/") or namespace.endswith("/"):
+        raise SettingError(
+            f"namespace {namespace!r} starts or ends with '/': {NAMESPACE_HINT}; "
+            f"use {namespace.strip('/')!r}"
+        )
+    if "" in namespace.split("/"):
+        raise SettingError(f"namespace {namespace!r} has an empty chunk ('//'): {NAMESPACE_HINT}")
+    wild = [c for c in "*$?#" if c in namespace]
+    if wild:
+        raise SettingError(
+            f"namespace {namespace!r} contains {' '.join(wild)}: wildcards and the characters "
+            f"* $ ? # are not allowed, {NAMESPACE_HINT}"
+        )
+    try:
+        zenoh.KeyExpr(namespace)
+    except zenoh.ZError as e:
+        raise SettingError(
+            f"namespace {namespace!r} is not a valid key: {_reason(e)}; {NAMESPACE_HINT}"
+        ) from e
+    return namespace
+
+
+def is_concrete(key: str) -> bool:
+    """True for a key with no wildcard chunk (``*``, ``**``, ``$*``): what a sample should carry."""
+    return not any(chunk in {"*", "**"} or "$*" in chunk for chunk in key.split("/"))
+
+
+@dataclass(frozen=True)
+class Qos:
+    """How one key's samples travel: see :func:`qos`."""
+
+    congestion_control: zenoh.CongestionControl
+    priority: zenoh.Priority
+    express: bool
+
+
+PICTURE_QOS = Qos(zenoh.CongestionControl.DROP, zenoh.Priority.DATA_LOW, express=True)
+RELIABLE_QOS = Qos(zenoh.CongestionControl.BLOCK, zenoh.Priority.DATA, express=False)
+PICTURE_TYPES: tuple[type[Message], ...] = (Image, PointCloud)
+
+
+def qos(message_type: type[Message]) -> Qos:
+    """Pictures drop under congestion (newest wins) at low priority; everything else blocks.
+
+    A picture late is worth nothing, and a stalled link must not hold up anything else: it
+    goes out at once (express) on the lowest data priority, whose queue is apart from the
+    small reliable messages' queue, and is dropped when that queue stays full.
+    """
+    return PICTURE_QOS if issubclass(message_type, PICTURE_TYPES) else RELIABLE_QOS
 
 
 def zenoh_config(args: argparse.Namespace, default_file: Path = CLIENT_CONFIG) -> zenoh.Config:
     """The configuration file, then the flags on top of it."""
+    secure: Path | None = getattr(args, "secure", None)
+    router = default_file == ROUTER_CONFIG
+    if secure is not None and default_file in (CLIENT_CONFIG, ROUTER_CONFIG):
+        default_file = SECURE_ROUTER_CONFIG if router else SECURE_CLIENT_CONFIG
     path: Path = args.config or default_file
     try:
         config = zenoh.Config.from_file(str(path))
     except Exception as e:  # zenoh raises its own ZError for a missing or malformed file
         raise BusError(f"cannot load Zenoh configuration {path}: {e}") from e
+    if secure is not None:
+        _insert_identity(config, secure, "router" if router else getattr(args, "identity", ""))
     connect, listen = args.connect, args.listen
     router_endpoint = os.environ.get(ROUTER_ENV)
     if router_endpoint and args.config is None:
@@ -97,6 +194,26 @@ def zenoh_config(args: argparse.Namespace, default_file: Path = CLIENT_CONFIG) -
     if listen:
         config.insert_json5("listen/endpoints", msgspec.json.encode(listen).decode())
     return config
+
+
+def _insert_identity(config: zenoh.Config, folder: Path, identity: str) -> None:
+    """Point the TLS settings at ``folder``'s CA and at ``identity``'s certificate and key."""
+    ca, cert, key = (folder / "ca.pem", folder / f"{identity}.pem", folder / f"{identity}.key")
+    for needed in (ca, cert, key):
+        if not needed.is_file():
+            raise SettingError(
+                f"no {needed} for the secured configuration: make the certificates with "
+                f"`onebox certs {folder}` (identity {identity!r})"
+            )
+    tls = {
+        "root_ca_certificate": str(ca.resolve()),
+        "listen_certificate": str(cert.resolve()),
+        "listen_private_key": str(key.resolve()),
+        "connect_certificate": str(cert.resolve()),
+        "connect_private_key": str(key.resolve()),
+    }
+    for name, value in tls.items():
+        config.insert_json5(f"transport/link/tls/{name}", msgspec.json.encode(value).decode())
 
 
 def install_signal_handlers() -> None:
@@ -131,23 +248,47 @@ class Publisher(Generic[M]):
 
         Declarations travel through the router, so a sample put right after a subscriber
         opened elsewhere can miss it; waiting here is waiting on Zenoh's matching listener.
+        This is the one such wait in onebox: a publisher on ``**`` waits for any subscriber.
         """
-        return wait_for_match(self._publisher, timeout_s)
+        matched = threading.Event()
+
+        def on_status(status: zenoh.MatchingStatus) -> None:
+            if status.matching:
+                matched.set()
+
+        listener = self._publisher.declare_matching_listener(on_status)
+        try:
+            # zenoh's stubs call matching_status a bool; it is a MatchingStatus, always truthy.
+            status: Any = self._publisher.matching_status
+            return bool(status.matching) or matched.wait(timeout_s)
+        finally:
+            listener.undeclare()
 
 
-def wait_for_match(publisher: Any, timeout_s: float) -> bool:
-    """Wait on a Zenoh publisher's matching listener until a subscriber matches."""
-    matched = threading.Event()
+class RouterWatch:
+    """Logs each router this session loses and each it (re)gains, from Zenoh's transport events.
 
-    def on_status(status: zenoh.MatchingStatus) -> None:
-        if status.matching:
-            matched.set()
+    A client has one router, the local one; a router's routers are the other hosts' routers.
+    """
 
-    listener = publisher.declare_matching_listener(on_status)
-    try:
-        return bool(publisher.matching_status) or matched.wait(timeout_s)
-    finally:
-        listener.undeclare()
+    def __init__(self, session: zenoh.Session) -> None:
+        self.lost = 0
+        self.regained = 0
+        self._listener: Any = session.info.declare_transport_events_listener(self._on_event)
+
+    def _on_event(self, event: zenoh.TransportEvent) -> None:
+        transport = event.transport
+        if transport.whatami != zenoh.WhatAmI.ROUTER:
+            return
+        if event.kind == zenoh.SampleKind.DELETE:
+            self.lost += 1
+            log.warning("lost router %s; reconnecting", transport.zid)
+        else:
+            self.regained += 1
+            log.warning("router %s connected", transport.zid)
+
+    def close(self) -> None:
+        self._listener.undeclare()
 
 
 @dataclass
@@ -159,15 +300,16 @@ class Bus:
     _closers: list[Callable[[], None]] = field(default_factory=list)
     _limiter: ReportLimiter = field(default_factory=lambda: ReportLimiter(log))
 
+    def __post_init__(self) -> None:
+        self.namespace = check_namespace(self.namespace)
+
     def key(self, name: str) -> str:
         """``camera/image_raw`` under the namespace: ``robot1/camera/image_raw``."""
-        ns = self.namespace.strip("/")
-        return f"{ns}/{name}" if ns else name
+        return f"{self.namespace}/{name}" if self.namespace else name
 
     def unkey(self, key: str) -> str:
         """The key without the namespace prefix."""
-        ns = self.namespace.strip("/")
-        return key.removeprefix(f"{ns}/") if ns else key
+        return key.removeprefix(f"{self.namespace}/") if self.namespace else key
 
     def publisher(
         self,
@@ -175,10 +317,12 @@ class Bus:
         message_type: type[M],
         *,
         latched: bool = False,
-        congestion_control: zenoh.CongestionControl = zenoh.CongestionControl.DROP,
+        congestion_control: zenoh.CongestionControl | None = None,
     ) -> Publisher[M]:
-        """A publisher on ``name``; ``latched`` keeps the last sample for late joiners."""
+        """A publisher on ``name`` with the :func:`qos` of its type; ``latched`` keeps the last
+        sample for late joiners; ``congestion_control`` overrides the type's (a replay blocks)."""
         key = self.key(name)
+        how = qos(message_type)
         if latched:
             pub: Any = zenoh.ext.declare_advanced_publisher(
                 self.session,
@@ -186,9 +330,15 @@ class Bus:
                 cache=zenoh.ext.CacheConfig(max_samples=1),
                 publisher_detection=True,
                 congestion_control=zenoh.CongestionControl.BLOCK,
+                priority=how.priority,
             )
         else:
-            pub = self.session.declare_publisher(key, congestion_control=congestion_control)
+            pub = self.session.declare_publisher(
+                key,
+                congestion_control=congestion_control or how.congestion_control,
+                priority=how.priority,
+                express=how.express,
+            )
         self._closers.append(pub.undeclare)
         return Publisher(key, message_type, pub)
 
@@ -204,6 +354,11 @@ class Bus:
 
         def on_sample(sample: zenoh.Sample) -> None:
             key = str(sample.key_expr)
+            if not is_concrete(key):
+                # Zenoh delivers a put on `**` to every subscriber it intersects; it names no
+                # key the pipeline knows, so it is nobody's capture.
+                self._limiter.warn(key, "wildcard", "a sample on a wildcard key, dropped")
+                return
             try:
                 callback(key, sample.payload.to_bytes())
             except Exception as e:  # a bad sample must never kill the subscriber thread
@@ -263,6 +418,7 @@ def open_bus(
 
     ``connect_timeout_s`` overrides how long a client waits for its router.
     """
+    check_namespace(getattr(args, "namespace", "") or "")
     config = zenoh_config(args, default_file)
     if connect_timeout_s is not None:
         config.insert_json5("connect/timeout_ms", str(round(connect_timeout_s * 1000)))
@@ -282,6 +438,8 @@ def open_bus(
         ) from e
     with session:
         bus = Bus(session, getattr(args, "namespace", "") or "")
+        watch = RouterWatch(session)
+        bus._closers.append(watch.close)
         try:
             yield bus
         finally:

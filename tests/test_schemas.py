@@ -1,4 +1,4 @@
-"""Messages: msgpack round trips, typed decoders that reject other types, schemas in the file."""
+"""Messages: msgpack round trips, typed decoders that reject other types, JSON schemas."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import json
 import msgspec
 import pytest
 
-from onebox.keys import TYPES
+from onebox.keys import TYPES, type_for_key
 from schemas import (
     BoundingBox3D,
     CameraInfo,
@@ -89,11 +89,6 @@ def test_garbage_is_a_decode_error() -> None:
         codec(Image).decode(b"\xc1 not msgpack")
 
 
-def test_codec_is_made_once() -> None:
-    """One codec per type: the encoder and decoder are built once and reused."""
-    assert codec(Image) is codec(Image)
-
-
 def test_an_older_reader_ignores_new_fields() -> None:
     """A field added by a newer writer does not break a reader that lacks it."""
 
@@ -115,11 +110,19 @@ def test_json_schema_describes_the_type(message_type: type[Message]) -> None:
     assert set(message_type.__struct_fields__) <= set(definition["properties"])
 
 
-def test_every_pipeline_key_has_a_type() -> None:
-    """The keys of DESIGN.md's table all map to their message types."""
-    assert TYPES["camera/depth/image_raw"] is Image
-    assert TYPES["camera/camera_info"] is CameraInfo
-    assert TYPES["tf_static"] is TFMessage
-    assert TYPES["detections"] is Detection3DArray
-    assert TYPES["camera/points"] is PointCloud
-    assert TYPES["sim/ground_truth"] is GroundTruth
+@pytest.mark.parametrize(
+    ("key", "message_type"),
+    [
+        ("robot1/camera/depth/image_raw", Image),
+        ("robot1/camera/camera_info", CameraInfo),
+        ("robot1/tf_static", TFMessage),
+        ("robot1/detections", Detection3DArray),
+        ("robot1/camera/points", PointCloud),
+        ("robot1/sim/ground_truth", GroundTruth),
+        ("robot1/camera/unknown", None),
+        ("robot2/detections", None),
+    ],
+)
+def test_a_namespaced_key_has_its_type(key: str, message_type: type[Message] | None) -> None:
+    """Under namespace robot1 each pipeline key has its type; other keys and namespaces none."""
+    assert type_for_key(key, "robot1") is message_type
