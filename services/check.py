@@ -25,11 +25,11 @@ import os
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any
 
 import msgspec
 
 from onebox import bus
+from onebox.describe import describe, split_namespace
 from onebox.errors import BusError, NothingArrived
 from onebox.keys import type_for_key
 from schemas import CameraInfo, Detection3DArray, Image, Message, PointCloud, codec
@@ -37,8 +37,6 @@ from schemas import type_name as schema_type_name
 
 log = logging.getLogger("check")
 
-SHOWN_IN_FULL = 16
-"""A list longer than this (or any bytes) is left out and described by its length."""
 ROUTER_WAIT_S = 1.5
 
 
@@ -109,59 +107,6 @@ def has_box(payload: bytes) -> bool:
         return bool(codec(Detection3DArray).decode(payload).detections)
     except (msgspec.DecodeError, msgspec.ValidationError):
         return False
-
-
-def _brief(value: Any) -> Any:
-    """``value`` with bytes and long lists replaced by a note of their length."""
-    if isinstance(value, bytes | bytearray):
-        return f"<{len(value)} bytes>"
-    if isinstance(value, dict):
-        return {k: _brief(v) for k, v in value.items() if k != "_type"}
-    if isinstance(value, list):
-        if len(value) > SHOWN_IN_FULL:
-            return f"<{len(value)} values>"
-        return [_brief(v) for v in value]
-    return value
-
-
-def _lines(value: Any, indent: int) -> list[str]:
-    pad = "  " * indent
-    out: list[str] = []
-    if isinstance(value, dict):
-        for k, v in value.items():
-            if isinstance(v, dict | list) and v and not _flat(v):
-                out.append(f"{pad}{k}:")
-                out.extend(_lines(v, indent + 1))
-            else:
-                out.append(f"{pad}{k}: {_scalar(v)}")
-    elif isinstance(value, list):
-        for item in value:
-            inner = _lines(item, indent + 1)
-            out.append(f"{pad}- {inner[0].strip()}" if inner else f"{pad}-")
-            out.extend(inner[1:])
-    else:
-        out.append(f"{pad}{_scalar(value)}")
-    return out
-
-
-def _flat(value: dict[str, Any] | list[Any]) -> bool:
-    """A list of plain numbers prints on one line, as ``[277.1, 0.0, 160.0, ...]``."""
-    return isinstance(value, list) and all(not isinstance(v, dict | list) for v in value)
-
-
-def _scalar(value: Any) -> str:
-    if isinstance(value, float):
-        return f"{value:.6g}"
-    if isinstance(value, list):
-        return "[" + ", ".join(_scalar(v) for v in value) + "]"
-    if isinstance(value, str):
-        return value if value else "''"
-    return str(value)
-
-
-def describe(message: Message) -> str:
-    """The message as indented ``field: value`` lines, large arrays left out."""
-    return "\n".join(_lines(_brief(msgspec.to_builtins(message, builtin_types=(bytes,))), 1))
 
 
 def lens_line(key: str, info: CameraInfo) -> str:
@@ -236,14 +181,43 @@ def report(seen: dict[str, Seen], b: bus.Bus, window_s: float) -> list[str]:
         what = "one detection" if message.detections else "no box in view"
         lines.append(f"{key} ({schema_type_name(Detection3DArray)}), {what}:")
         lines.append(describe(message))
+    hint = namespace_hint(list(seen), b.namespace)
+    if hint:
+        lines += ["", hint]
     return lines
 
 
+def namespace_hint(keys: list[str], namespace: str) -> str | None:
+    """When pipeline keys live under a namespace this run did not ask for, say how to ask."""
+    found: set[str] = set()
+    for key in keys:
+        under = split_namespace(key) if type_for_key(key, namespace) is None else None
+        if under is not None:
+            found.add(under[0])
+    if not found:
+        return None
+    flag = " or ".join(f"`onebox check --namespace {ns}`" for ns in sorted(found))
+    return (
+        f"Keys under {', '.join(f'{ns}/' for ns in sorted(found))} look like the pipeline's: "
+        f"{flag} reads them with their types"
+    )
+
+
+@dataclass(frozen=True)
+class CheckSettings:
+    """What ``onebox check`` was asked for."""
+
+    window_s: float
+    endpoints: str
+    """The routers it connects to, as the user would write them."""
+
+
 def main(args: argparse.Namespace) -> int:
-    listener = Listener()
     default = os.environ.get(bus.ROUTER_ENV) or bus.DEFAULT_ENDPOINT
-    endpoints = ", ".join(args.connect or [default])
-    wait_s = min(ROUTER_WAIT_S, args.window_s)
+    settings = CheckSettings(window_s=args.window_s, endpoints=", ".join(args.connect or [default]))
+    listener = Listener()
+    endpoints = settings.endpoints
+    wait_s = min(ROUTER_WAIT_S, settings.window_s)
     nothing = f"nothing is running: no router at {endpoints}. {START_HINT}"
     with contextlib.ExitStack() as stack:
         try:
@@ -257,13 +231,13 @@ def main(args: argparse.Namespace) -> int:
             raise NothingArrived(nothing)
         b.subscribe_raw("**", listener.on_sample)
         b.subscribe_raw("tf_static", listener.on_latched, history=True)
-        log.info("listening on %s for %g s", b.key("**"), args.window_s)
-        time.sleep(args.window_s)  # the measuring window itself: rates are counted over it
+        log.info("listening on %s for %g s", b.key("**"), settings.window_s)
+        time.sleep(settings.window_s)  # the measuring window itself: rates are counted over it
         seen = listener.snapshot()
         if not seen:
             raise NothingArrived(
                 f"the router at {endpoints} is up, but nothing was published in "
-                f"{args.window_s:g} s. {START_HINT}"
+                f"{settings.window_s:g} s. {START_HINT}"
             )
-        print("\n".join(report(seen, b, args.window_s)))
+        print("\n".join(report(seen, b, settings.window_s)))
     return 0

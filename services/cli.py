@@ -6,7 +6,9 @@ Every process and tool is a subcommand; ``onebox COMMAND --help`` explains each.
 from __future__ import annotations
 
 import argparse
+import difflib
 import importlib
+import importlib.metadata
 import logging
 import os
 import sys
@@ -26,8 +28,13 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "snapshot": ("services.snapshot", "record one capture into an .mcap file and exit"),
     "replay": ("services.replay", "publish an .mcap recording back onto its keys (ros2 bag play)"),
     "info": ("services.info", "summarise an .mcap recording (ros2 bag info)"),
+    "export": ("services.export", "write an .mcap recording for ROS 2 or Foxglove tools"),
     "pixels": ("services.pixels", "print every pixel of the basic camera (make camera.pixels)"),
     "check": ("services.check", "list what is being published (make camera.check)"),
+    "echo": ("services.echo", "print every message on a key, readable (ros2 topic echo)"),
+    "hz": ("services.hz", "how often messages arrive on a key (ros2 topic hz)"),
+    "bw": ("services.bw", "how many bytes a second a key carries (ros2 topic bw)"),
+    "pub": ("services.pub", "publish a message typed from JSON (ros2 topic pub)"),
 }
 
 
@@ -36,11 +43,28 @@ def _top_parser() -> argparse.ArgumentParser:
         prog="onebox",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
+        allow_abbrev=False,
         epilog="commands:\n"
         + "\n".join(f"  {name:<10} {line}" for name, (_, line) in COMMANDS.items()),
     )
     parser.add_argument("command", metavar="COMMAND", help="one of the commands below")
+    parser.add_argument("--version", action="store_true", help="print onebox's version and exit")
     return parser
+
+
+def version() -> str:
+    """The installed package's version, as pip knows it."""
+    try:
+        return importlib.metadata.version("onebox")
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown (not installed: run `pip install -e .` in the checkout)"
+
+
+def unknown_command(name: str) -> str:
+    """The error for a command that does not exist, with the nearest one when there is one."""
+    close = difflib.get_close_matches(name, COMMANDS, n=1)
+    hint = f": did you mean `onebox {close[0]}`?" if close else ""
+    return f"unknown command {name!r}{hint} (`onebox --help` lists them all)"
 
 
 def command_parser(name: str) -> tuple[argparse.ArgumentParser, object]:
@@ -50,6 +74,7 @@ def command_parser(name: str) -> tuple[argparse.ArgumentParser, object]:
         prog=f"onebox {name}",
         description=module.__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
+        allow_abbrev=False,  # `--rat 0` is a mistake to report, never `--rate 0`
     )
     module.add_arguments(parser)
     return parser, module
@@ -61,9 +86,12 @@ def main(argv: list[str] | None = None) -> int:
     if not argv or argv[0] in {"-h", "--help"}:
         _top_parser().print_help()
         return 0 if argv else 2
+    if argv[0] == "--version":
+        print(f"onebox {version()}")
+        return 0
     name, rest = argv[0], argv[1:]
     if name not in COMMANDS:
-        _top_parser().error(f"unknown command {name!r}")
+        _top_parser().error(unknown_command(name))
     logging.basicConfig(
         level=os.environ.get("ONEBOX_LOG", "INFO").upper(),
         format="%(levelname)s [%(name)s] %(message)s",

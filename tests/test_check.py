@@ -5,6 +5,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
+from onebox.describe import describe as describe_message
 from onebox.keys import TYPES
 from onebox.recording import describe
 from onebox.testing.fake_capture import write_mcap
@@ -56,7 +57,7 @@ def test_check_lists_a_replay_with_types_rates_lens_and_one_of_each(processes, t
         assert "Hz" in lines[key]
     assert "latched" in lines["tf_static"]
     assert "camera/camera_info: 320 x 240, fx 277.128  fy 277.128  cx 159.500  cy 119.500" in out
-    assert "data: <230400 bytes>" in out and "data: <307200 bytes>" in out
+    assert "data: <230,400 bytes>" in out and "data: <307,200 bytes>" in out
     assert "class_id: box" in out and "one detection" in out
     assert len(out) < 20_000, "the large arrays must be left out"
 
@@ -72,14 +73,34 @@ def test_check_lists_every_key_of_the_committed_capture(processes):
         assert schema_name in listed[key], listed.get(key)
 
 
+def test_check_hints_at_the_namespace_of_namespaced_keys(processes, tmp_path):
+    """A replay under robot1/ seen without --namespace: check names the flag that reads it."""
+    recording = write_mcap(tmp_path / "fake.mcap", captures=2)
+    processes.start("replay", str(recording), "--loop", "--namespace", "robot1")
+    done = run_check(processes.endpoint, "--window-s", "1.5")
+    assert done.returncode == 0, done.stderr
+    assert "  robot1/camera/image_raw " in done.stdout
+    assert "`onebox check --namespace robot1`" in done.stdout
+
+
 def test_describe_leaves_large_arrays_out():
     """Bytes become their length, long lists their count; short ones stay."""
     image = Image(header=Header(stamp_ns=5, frame_id="f"), width=2, height=1, data=b"\x01" * 6)
-    text = check.describe(image)
+    text = describe_message(image)
     assert "data: <6 bytes>" in text and "stamp_ns: 5" in text and "_type" not in text
     info = CameraInfo(k=[1.0] * 9, d=[0.0] * 40)
-    text = check.describe(info)
-    assert "d: <40 values>" in text and "k: [1, 1, 1, 1, 1, 1, 1, 1, 1]" in text
+    text = describe_message(info)
+    assert "d: <40 values>" in text and "k: [1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0]" in text
+
+
+def test_namespace_hint_names_the_namespace_only_when_keys_are_under_one():
+    """Pipeline keys under robot1/ without --namespace give the flag to use; plain keys none."""
+    keys = ["robot1/camera/image_raw", "robot1/tf_static", "other/thing"]
+    hint = check.namespace_hint(keys, "")
+    assert hint is not None and "`onebox check --namespace robot1`" in hint
+    assert "other" not in hint
+    assert check.namespace_hint(keys, "robot1") is None
+    assert check.namespace_hint(["camera/image_raw", "tf_static"], "") is None
 
 
 def test_lens_line_names_the_four_numbers():
