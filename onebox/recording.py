@@ -19,10 +19,9 @@ log-time order.
 
 from __future__ import annotations
 
-import io
+import contextlib
 import logging
 import os
-import struct
 import threading
 import time
 from collections.abc import Iterator
@@ -32,11 +31,11 @@ from types import TracebackType
 from typing import Any
 
 import msgspec
-from mcap.exceptions import McapError
-from mcap.reader import make_reader
-from mcap.records import Channel, Chunk, Footer, Header, Schema, Statistics
+from mcap.data_stream import RecordBuilder
+from mcap.exceptions import EndOfFile
+from mcap.records import Channel, Chunk, DataEnd, Footer, Header, Metadata, Schema
 from mcap.records import Message as McapMessage
-from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
 from onebox.errors import RecordingError
@@ -56,6 +55,9 @@ COMPRESSIONS: dict[str, CompressionType] = {
     "lz4": CompressionType.LZ4,
     "zstd": CompressionType.ZSTD,
 }
+
+MAX_TIME_NS = 2**64 - 1
+"""MCAP stores times as unsigned 64-bit nanoseconds."""
 
 TYPES_BY_NAME: dict[str, type[Message]] = {type_name(t): t for t in TYPES.values()}
 """Every pipeline type by the schema name a recording stores for it."""
@@ -104,6 +106,8 @@ class RecordingInfo:
     sim_start_ns: int | None = None
     """The first header stamp written, from the file's ``onebox`` metadata; None if unknown."""
     sim_end_ns: int | None = None
+    damaged_chunks: int = 0
+    """Chunks skipped because their checksum or compression did not hold (``recover``)."""
 
     @property
     def duration_s(self) -> float:
@@ -162,14 +166,42 @@ class _WriteThrough:
     def __init__(self, fd: int) -> None:
         self._fd = fd
         self._position = 0
+        self.failed: OSError | None = None
+        """The error that stopped writing (a full disk); ``tell()`` is then where whole
+        records end, since the writer hands over whole records in each call."""
 
     def write(self, data: bytes | bytearray | memoryview) -> int:
+        if self.failed is not None:
+            raise self.failed
         view = memoryview(data)
-        while view:
-            written = os.write(self._fd, view)
-            view = view[written:]
+        try:
+            while view:
+                written = os.write(self._fd, view)
+                view = view[written:]
+        except OSError as e:
+            self.failed = e
+            raise
         self._position += len(data)
         return len(data)
+
+    def close_after_failure(self) -> bool:
+        """Cut the file back to its last whole record and end it with an empty summary, so
+        that it reads back without ``--recover``; False when not even that fits."""
+        builder = RecordBuilder()
+        DataEnd(data_section_crc=0).write(builder)
+        Footer(summary_start=0, summary_offset_start=0, summary_crc=0).write(builder)
+        tail = builder.end() + MAGIC  # type: ignore[no-untyped-call]  # mcap leaves it unannotated
+        try:
+            os.ftruncate(self._fd, self._position)
+            os.lseek(self._fd, self._position, os.SEEK_SET)
+            view = memoryview(tail)
+            while view:
+                view = view[os.write(self._fd, view) :]
+        except OSError:
+            with contextlib.suppress(OSError):
+                os.ftruncate(self._fd, self._position)
+            return False
+        return True
 
     def tell(self) -> int:
         return self._position
@@ -222,6 +254,7 @@ class RecordingWriter:
             self._stream,  # type: ignore[arg-type]  # a file-like object is all it needs
             chunk_size=chunk_size_bytes,
             compression=COMPRESSIONS[compression],
+            enable_data_crcs=True,
         )
         self._writer.start(profile=PROFILE, library="onebox")
         self._channels: dict[str, int] = {}
@@ -232,6 +265,8 @@ class RecordingWriter:
         self.byte_count = 0
         self.sim_start_ns: int | None = None
         self.sim_end_ns: int | None = None
+        self.out_of_range: dict[str, int] = {}
+        """Messages per key whose times MCAP could not hold, recorded with the nearest it can."""
 
     def channel(self, key: str) -> int:
         """The channel of ``key``, registered with its type's schema the first time."""
@@ -261,10 +296,12 @@ class RecordingWriter:
         if publish_time_ns is None:
             stamp = stamp_ns(payload)
             publish_time_ns = log_time_ns if stamp is None else stamp
-            if stamp is not None:
+            if stamp is not None and 0 <= stamp <= MAX_TIME_NS:
                 start, end = self.sim_start_ns, self.sim_end_ns
                 self.sim_start_ns = stamp if start is None else min(start, stamp)
                 self.sim_end_ns = stamp if end is None else max(end, stamp)
+        log_time_ns = self._in_range(key, "log", log_time_ns)
+        publish_time_ns = self._in_range(key, "publish", publish_time_ns)
         self._sequence += 1
         self._writer.add_message(
             channel_id=self.channel(key),
@@ -276,6 +313,23 @@ class RecordingWriter:
         self.message_count += 1
         self.byte_count += len(payload)
 
+    def _in_range(self, key: str, which: str, time_ns: int) -> int:
+        """``time_ns`` held to what MCAP can store (0 to 2^64 - 1); said once per key."""
+        if 0 <= time_ns <= MAX_TIME_NS:
+            return time_ns
+        held = min(max(time_ns, 0), MAX_TIME_NS)
+        self.out_of_range[key] = self.out_of_range.get(key, 0) + 1
+        if self.out_of_range[key] == 1:
+            log.warning(
+                "%s: a %s time of %d ns is outside what MCAP can store (0 to 2^64 - 1 ns); "
+                "recorded with %d instead (said once per key; the bytes are unchanged)",
+                key,
+                which,
+                time_ns,
+                held,
+            )
+        return held
+
     def flush(self) -> None:
         """Close the chunk being built and hand it to the OS, so a SIGKILL cannot lose it."""
         self._writer.flush()  # type: ignore[no-untyped-call]  # mcap leaves it unannotated
@@ -286,14 +340,36 @@ class RecordingWriter:
             return
         self._finished = True
         try:
-            if self.sim_start_ns is not None and self.sim_end_ns is not None:
-                self._writer.add_metadata(
-                    METADATA_NAME,
-                    {"sim_start_ns": str(self.sim_start_ns), "sim_end_ns": str(self.sim_end_ns)},
-                )
-            self._writer.finish()  # type: ignore[no-untyped-call]
+            if self._stream.failed is None:
+                try:
+                    if self.sim_start_ns is not None and self.sim_end_ns is not None:
+                        self._writer.add_metadata(
+                            METADATA_NAME,
+                            {
+                                "sim_start_ns": str(self.sim_start_ns),
+                                "sim_end_ns": str(self.sim_end_ns),
+                            },
+                        )
+                    self._writer.finish()  # type: ignore[no-untyped-call]
+                    return
+                except OSError:
+                    pass  # the stream noted it; the file is closed by hand below
+            failed = self._stream.failed
+            closed = self._stream.close_after_failure()
         finally:
             self._stream.close()
+        how = (
+            "it is closed after the last whole chunk and reads back as it is"
+            if closed
+            else "it ends at the last whole chunk: read it with --recover"
+        )
+        reason = failed.strerror if failed is not None and failed.strerror else str(failed)
+        raise RecordingError(f"cannot write {self.path}: {reason}; {how}")
+
+    @property
+    def failed(self) -> OSError | None:
+        """The error that stopped writing the file (a full disk), if one did."""
+        return self._stream.failed
 
     def __enter__(self) -> RecordingWriter:
         return self
@@ -341,87 +417,148 @@ def _truncated(path: Path) -> RecordingError:
     )
 
 
-def _recovered_records(path: Path, f: io.BufferedReader) -> Iterator[Any]:
-    """Records up to the first one that is cut short; whole chunks only."""
-    reader = StreamReader(f, emit_chunks=True)
-    records = reader.records
-    while True:
-        try:
-            record = next(records)
-        except StopIteration:
-            return
-        except (McapError, struct.error, EOFError, ValueError) as e:
-            log.info("%s: stopped at a record cut short (%s)", path, type(e).__name__)
-            return
-        if isinstance(record, Chunk):
+def _damaged(path: Path, where: str, error: BaseException) -> RecordingError:
+    return RecordingError(
+        f"{path} is damaged ({where}: {type(error).__name__}: {_short(error)}); "
+        "pass --recover to read what is intact"
+    )
+
+
+def _short(error: BaseException) -> str:
+    text = str(error).splitlines()[0] if str(error) else ""
+    return text[:200]
+
+
+@dataclass
+class ReadReport:
+    """What a pass over a recording found besides its records."""
+
+    damaged_chunks: int = 0
+    """Chunks whose checksum or compression did not hold; skipped with ``recover``."""
+    stopped_at: int | None = None
+    """The offset where the records stopped making sense (a cut or damaged file), if they did."""
+    complete: bool = False
+    """Whether the pass reached the data section's end (a file not cut short)."""
+    chunks: int = 0
+    """Chunks read whole."""
+    compressions: set[str] = field(default_factory=set)
+
+    def say(self, path: Path) -> None:
+        """Log, once, what a recovered read could not use."""
+        if self.damaged_chunks:
+            log.warning(
+                "%s: skipped %d damaged chunk%s (checksum or compression did not hold)",
+                path,
+                self.damaged_chunks,
+                "" if self.damaged_chunks == 1 else "s",
+            )
+        if self.stopped_at is not None:
+            log.warning(
+                "%s: read up to byte %d; the rest is cut short or damaged", path, self.stopped_at
+            )
+
+
+# A damaged file can make mcap's record parsers and the decompressors raise almost anything
+# (struct.error, ValueError, OverflowError, zstandard.ZstdError, lz4's RuntimeError, ...):
+# every one of them means "this part of the file is not what it says", so each is caught at
+# the one place a record is read and turned into a RecordingError or a skipped chunk.
+_READ_ERRORS = (Exception,)
+
+
+def _records(path: Path, recover: bool, report: ReadReport) -> Iterator[Any]:
+    """Every record of the data section in file order, chunks broken up, checksums checked.
+
+    Strict (``recover`` off), the first damage raises RecordingError. With ``recover`` a chunk
+    whose checksum or compression fails is skipped and counted, and a record that cannot be
+    framed ends the pass; ``report`` says what happened.
+    """
+    try:
+        f = path.open("rb")
+    except OSError as e:
+        raise RecordingError(f"{path}: {e.strerror}") from e
+    with f:
+        reader = StreamReader(f, emit_chunks=True, validate_crcs=True)
+        records = reader.records
+        while True:
+            offset = f.tell()
             try:
-                yield from breakup_chunk(record, validate_crc=True)
-            except (McapError, ValueError) as e:
-                log.warning("%s: dropped a damaged chunk (%s)", path, e)
+                record = next(records)
+            except StopIteration:
                 return
-        else:
-            yield record
+            except _READ_ERRORS as e:
+                if isinstance(e, CRCValidationError) and isinstance(e.record, DataEnd):
+                    # Something in the data section (a chunk's header, an index) was changed.
+                    if not recover:
+                        raise _damaged(path, "the data section's checksum", e) from e
+                    report.complete = True
+                    return
+                if not recover:
+                    if isinstance(e, (EndOfFile, EOFError)):
+                        raise _truncated(path) from e
+                    raise _damaged(path, f"a record near byte {offset}", e) from e
+                report.stopped_at = offset
+                return
+            if isinstance(record, Chunk):
+                try:
+                    inner = breakup_chunk(record, validate_crc=True)
+                except _READ_ERRORS as e:
+                    if not recover:
+                        raise _damaged(path, f"the chunk near byte {offset}", e) from e
+                    report.damaged_chunks += 1
+                    continue
+                report.chunks += 1
+                report.compressions.add(record.compression or "none")
+                yield from inner
+            elif isinstance(record, DataEnd):
+                report.complete = True
+                yield record
+                return
+            else:
+                yield record
 
 
-def _iter_recovered(path: Path, keys: set[str] | None) -> Iterator[Recorded]:
+def _messages(path: Path, keys: set[str] | None, recover: bool) -> Iterator[Recorded]:
+    """The messages of one pass, in file order (log-time order for onebox's recorder)."""
     schemas: dict[int, Schema] = {}
     channels: dict[int, Channel] = {}
-    with path.open("rb") as f:
-        for record in _recovered_records(path, f):
-            if isinstance(record, Schema):
-                schemas[record.id] = record
-            elif isinstance(record, Channel):
-                channels[record.id] = record
-            elif isinstance(record, McapMessage):
-                channel = channels.get(record.channel_id)
-                if channel is None or (keys is not None and channel.topic not in keys):
-                    continue
-                schema = schemas.get(channel.schema_id)
-                yield Recorded(
-                    key=channel.topic,
-                    log_time_ns=record.log_time,
-                    publish_time_ns=record.publish_time,
-                    payload=record.data,
-                    schema_name=schema.name if schema else "",
-                )
-            elif isinstance(record, Footer):
-                return
+    report = ReadReport()
+    for record in _records(path, recover, report):
+        if isinstance(record, Schema):
+            schemas[record.id] = record
+        elif isinstance(record, Channel):
+            channels[record.id] = record
+        elif isinstance(record, McapMessage):
+            channel = channels.get(record.channel_id)
+            if channel is None or (keys is not None and channel.topic not in keys):
+                continue
+            schema = schemas.get(channel.schema_id)
+            yield Recorded(
+                key=channel.topic,
+                log_time_ns=record.log_time,
+                publish_time_ns=record.publish_time,
+                payload=record.data,
+                schema_name=schema.name if schema else "",
+            )
+    if recover:
+        report.say(path)
 
 
 def iter_messages(
     path: Path | str, keys: list[str] | None = None, *, recover: bool = False
 ) -> Iterator[Recorded]:
-    """Every message of a recording (only ``keys``, if given), in log-time order.
+    """Every message of a recording (only ``keys``, if given), in file order, which for
+    onebox's recorder is log-time order. Every chunk's checksum is checked.
 
     Raises :class:`RecordingError` naming the file when it is missing, empty, not MCAP or
-    truncated (unless ``recover``) at once, and when it is damaged as soon as that is found.
+    truncated at once, and when it is damaged as soon as that is found. With ``recover`` a
+    truncated file gives its complete chunks and a damaged chunk is skipped; how many were
+    skipped is logged at the end.
     """
     path = Path(path)
     complete = _check_file(path)
-    wanted = set(keys) if keys is not None else None
-    if not complete:
-        if not recover:
-            raise _truncated(path)
-        return _iter_recovered(path, wanted)
-    return _iter_complete(path, wanted)
-
-
-def _iter_complete(path: Path, wanted: set[str] | None) -> Iterator[Recorded]:
-    try:
-        with path.open("rb") as f:
-            reader = make_reader(f)
-            for schema, channel, message in reader.iter_messages(
-                topics=sorted(wanted) if wanted is not None else None, log_time_order=True
-            ):
-                yield Recorded(
-                    key=channel.topic,
-                    log_time_ns=message.log_time,
-                    publish_time_ns=message.publish_time,
-                    payload=message.data,
-                    schema_name=schema.name if schema else "",
-                )
-    except (McapError, struct.error, EOFError, ValueError) as e:
-        raise RecordingError(f"{path} is damaged: {type(e).__name__}: {e}") from e
+    if not complete and not recover:
+        raise _truncated(path)
+    return _messages(path, set(keys) if keys is not None else None, recover)
 
 
 def read_capture(
@@ -452,102 +589,54 @@ def read_capture(
 
 
 def describe(path: Path | str, *, recover: bool = False) -> RecordingInfo:
-    """What a recording holds, read from its summary (or, for a recovered file, its messages)."""
+    """What a recording holds, counted by reading it through with every checksum checked.
+
+    Reading the whole file (rather than trusting its summary) is what lets ``info`` refuse a
+    file whose messages were changed after it was written.
+    """
     path = Path(path)
     complete = _check_file(path)
+    if not complete and not recover:
+        raise _truncated(path)
     size = path.stat().st_size
-    if not complete:
-        if not recover:
-            raise _truncated(path)
-        return _describe_by_reading(path, size)
-    try:
-        with path.open("rb") as f:
-            reader = make_reader(f)
-            header = reader.get_header()
-            summary = reader.get_summary()
-            metadata = {m.name: m.metadata for m in reader.iter_metadata()}
-    except (McapError, struct.error, EOFError, ValueError) as e:
-        raise RecordingError(f"{path} is damaged: {type(e).__name__}: {e}") from e
-    if summary is None or summary.statistics is None:
-        # A valid file written without a summary: count by reading it through.
-        return _describe_by_reading(path, size)
-    stats: Statistics = summary.statistics
-    compressions = sorted({c.compression or "none" for c in summary.chunk_indexes})
-    info = RecordingInfo(
-        path=path,
-        size_bytes=size,
-        complete=True,
-        message_count=stats.message_count,
-        start_ns=stats.message_start_time,
-        end_ns=stats.message_end_time,
-        chunk_count=stats.chunk_count,
-        compression=", ".join(compressions) or "none",
-        library=header.library,
-    )
-    sim = metadata.get(METADATA_NAME, {})
-    if "sim_start_ns" in sim and "sim_end_ns" in sim:
-        info.sim_start_ns, info.sim_end_ns = int(sim["sim_start_ns"]), int(sim["sim_end_ns"])
-    for channel in sorted(summary.channels.values(), key=lambda c: c.topic):
-        schema = summary.schemas.get(channel.schema_id)
-        info.keys.append(
-            KeyInfo(
-                key=channel.topic,
-                schema_name=schema.name if schema else "",
-                schema_encoding=schema.encoding if schema else "",
-                message_encoding=channel.message_encoding,
-                count=stats.channel_message_counts.get(channel.id, 0),
-            )
-        )
-    return info
-
-
-def _describe_by_reading(path: Path, size: int) -> RecordingInfo:
     schemas: dict[int, Schema] = {}
     keys: dict[int, KeyInfo] = {}
     info = RecordingInfo(path, size, False, 0, 0, 0, 0, "", "")
-    compressions: set[str] = set()
-    with path.open("rb") as f:
-        reader = StreamReader(f, emit_chunks=True)
-        records = reader.records
-        while True:
+    report = ReadReport()
+    for record in _records(path, recover, report):
+        if isinstance(record, Header):
+            info.library = record.library
+        elif isinstance(record, Schema):
+            schemas[record.id] = record
+        elif isinstance(record, Channel):
+            schema = schemas.get(record.schema_id)
+            keys[record.id] = KeyInfo(
+                record.topic,
+                schema.name if schema else "",
+                schema.encoding if schema else "",
+                record.message_encoding,
+            )
+        elif isinstance(record, McapMessage) and record.channel_id in keys:
+            keys[record.channel_id].count += 1
+            if info.message_count == 0:
+                info.start_ns = info.end_ns = record.log_time
+            info.start_ns = min(info.start_ns, record.log_time)
+            info.end_ns = max(info.end_ns, record.log_time)
+            info.message_count += 1
+        elif isinstance(record, Metadata) and record.name == METADATA_NAME:
+            sim = record.metadata
             try:
-                record = next(records)
-            except StopIteration:
-                break
-            except (McapError, struct.error, EOFError, ValueError):
-                break
-            inner: list[Any] = [record]
-            if isinstance(record, Chunk):
-                try:
-                    inner = list(breakup_chunk(record, validate_crc=True))
-                except (McapError, ValueError):
-                    break
-                info.chunk_count += 1
-                compressions.add(record.compression or "none")
-            for r in inner:
-                if isinstance(r, Header):
-                    info.library = r.library
-                elif isinstance(r, Schema):
-                    schemas[r.id] = r
-                elif isinstance(r, Channel):
-                    schema = schemas.get(r.schema_id)
-                    keys[r.id] = KeyInfo(
-                        r.topic,
-                        schema.name if schema else "",
-                        schema.encoding if schema else "",
-                        r.message_encoding,
-                    )
-                elif isinstance(r, McapMessage) and r.channel_id in keys:
-                    keys[r.channel_id].count += 1
-                    if info.message_count == 0:
-                        info.start_ns = info.end_ns = r.log_time
-                    info.start_ns = min(info.start_ns, r.log_time)
-                    info.end_ns = max(info.end_ns, r.log_time)
-                    info.message_count += 1
-                elif isinstance(r, Footer):
-                    info.complete = True
-    info.compression = ", ".join(sorted(compressions)) or "none"
+                info.sim_start_ns = int(sim["sim_start_ns"])
+                info.sim_end_ns = int(sim["sim_end_ns"])
+            except (KeyError, ValueError):
+                info.sim_start_ns = info.sim_end_ns = None
+    info.complete = complete and report.complete and report.stopped_at is None
+    info.damaged_chunks = report.damaged_chunks
+    info.chunk_count = report.chunks
+    info.compression = ", ".join(sorted(report.compressions)) or "none"
     info.keys = sorted(keys.values(), key=lambda k: k.key)
+    if recover:
+        report.say(path)
     return info
 
 
