@@ -33,13 +33,13 @@ from typing import Any
 import msgspec
 from mcap.data_stream import RecordBuilder
 from mcap.exceptions import EndOfFile
-from mcap.records import Channel, Chunk, DataEnd, Footer, Header, Metadata, Schema
+from mcap.records import Channel, Chunk, DataEnd, Footer, Header, Schema
 from mcap.records import Message as McapMessage
 from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
 from onebox.errors import RecordingError
-from onebox.keys import TYPES, type_for_key
+from onebox.keys import TF_STATIC, TYPES, type_for_key
 from schemas import Message, codec, json_schema, type_name
 
 log = logging.getLogger("recording")
@@ -104,7 +104,8 @@ class RecordingInfo:
     library: str
     keys: list[KeyInfo] = field(default_factory=list)
     sim_start_ns: int | None = None
-    """The first header stamp written, from the file's ``onebox`` metadata; None if unknown."""
+    """The earliest header stamp of the messages that tell when the recording ran (see
+    :func:`sim_stamp`); None when no message has one."""
     sim_end_ns: int | None = None
     damaged_chunks: int = 0
     """Chunks skipped because their checksum or compression did not hold (``recover``)."""
@@ -145,6 +146,19 @@ def stamp_ns(payload: bytes | memoryview) -> int | None:
     if stamped.transforms and stamped.transforms[0].header is not None:
         return stamped.transforms[0].header.stamp_ns
     return None
+
+
+def sim_stamp(key: str, payload: bytes | memoryview) -> int | None:
+    """The stamp a message adds to the simulated time a recording spans, or None.
+
+    A latched key (``tf_static``, published once and handed to every late joiner) and an
+    unstamped message (stamp 0, as static transforms are written) say nothing about when the
+    recording ran: counted, one tf_static stamped 0 made an 11.5 s recording span 209.6 s.
+    """
+    if key == TF_STATIC or key.endswith(f"/{TF_STATIC}"):
+        return None
+    stamp = stamp_ns(payload)
+    return stamp if stamp is not None and 0 < stamp <= MAX_TIME_NS else None
 
 
 def has_header(message_type: type[Message] | None) -> bool:
@@ -296,10 +310,11 @@ class RecordingWriter:
         if publish_time_ns is None:
             stamp = stamp_ns(payload)
             publish_time_ns = log_time_ns if stamp is None else stamp
-            if stamp is not None and 0 <= stamp <= MAX_TIME_NS:
+            counted = sim_stamp(key, payload)
+            if counted is not None:
                 start, end = self.sim_start_ns, self.sim_end_ns
-                self.sim_start_ns = stamp if start is None else min(start, stamp)
-                self.sim_end_ns = stamp if end is None else max(end, stamp)
+                self.sim_start_ns = counted if start is None else min(start, counted)
+                self.sim_end_ns = counted if end is None else max(end, counted)
         log_time_ns = self._in_range(key, "log", log_time_ns)
         publish_time_ns = self._in_range(key, "publish", publish_time_ns)
         self._sequence += 1
@@ -623,13 +638,13 @@ def describe(path: Path | str, *, recover: bool = False) -> RecordingInfo:
             info.start_ns = min(info.start_ns, record.log_time)
             info.end_ns = max(info.end_ns, record.log_time)
             info.message_count += 1
-        elif isinstance(record, Metadata) and record.name == METADATA_NAME:
-            sim = record.metadata
-            try:
-                info.sim_start_ns = int(sim["sim_start_ns"])
-                info.sim_end_ns = int(sim["sim_end_ns"])
-            except (KeyError, ValueError):
-                info.sim_start_ns = info.sim_end_ns = None
+            # From the messages, not the file's metadata: files recorded before latched and
+            # unstamped messages were left out of it still print the true span.
+            stamp = sim_stamp(keys[record.channel_id].key, record.data)
+            if stamp is not None:
+                start, end = info.sim_start_ns, info.sim_end_ns
+                info.sim_start_ns = stamp if start is None else min(start, stamp)
+                info.sim_end_ns = stamp if end is None else max(end, stamp)
     info.complete = complete and report.complete and report.stopped_at is None
     info.damaged_chunks = report.damaged_chunks
     info.chunk_count = report.chunks

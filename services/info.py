@@ -3,9 +3,10 @@
     onebox info tests/data/one_box.mcap
 
 Reads: FILE.mcap only (no Zenoh). Prints its size, duration, start and end (log time: when the
-messages arrived), the simulated time they span (their header stamps, as the recorder noted
-them), the message and chunk counts and the compression, then per key its type, count,
-message encoding and schema. A file cut short by a killed recorder is reported as truncated;
+messages arrived), the simulated time they span (their header stamps; latched ``tf_static`` and
+unstamped messages, stamp 0, are left out: they say nothing about when the recording ran),
+the message and chunk counts and the compression, then per key its type, count, message
+encoding and schema. A file cut short by a killed recorder is reported as truncated;
 ``--recover`` summarises its complete chunks instead.
 """
 
@@ -13,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+from dataclasses import dataclass
 from pathlib import Path
 
 from onebox.recording import RecordingInfo, describe
@@ -77,7 +79,16 @@ def render(info: RecordingInfo) -> str:
     return "\n".join(lines)
 
 
+@dataclass(frozen=True)
+class InfoSettings:
+    """Which recording ``onebox info`` describes, and how strictly it reads it."""
+
+    file: Path
+    recover: bool
+
+
 def main(args: argparse.Namespace) -> int:
-    info = describe(args.file, recover=args.recover)
+    settings = InfoSettings(file=args.file, recover=args.recover)
+    info = describe(settings.file, recover=settings.recover)
     print(render(info))
     return 0

@@ -11,9 +11,10 @@ import msgspec
 import pytest
 
 from onebox import topic_stats
-from onebox.testing.fake_capture import write_mcap
-from onebox.testing.processes import ROOT
-from schemas import Detection3DArray, codec
+from onebox.recording import RecordingWriter, describe
+from onebox.testing.fake_capture import capture, tf_static, write_mcap
+from onebox.testing.processes import CAPTURE, ROOT
+from schemas import Detection3DArray, Header, TFMessage, codec
 
 
 def onebox(*args: str, timeout_s: float = 60) -> subprocess.CompletedProcess[str]:
@@ -208,3 +209,31 @@ def test_version_and_help():
     listed = onebox("--help").stdout
     for command in ("echo", "hz", "bw", "pub"):
         assert f"\n  {command} " in listed
+
+
+def test_info_leaves_latched_and_unstamped_messages_out_of_the_simulated_time(tmp_path):
+    """tf_static (latched, stamped 0 or long ago) does not stretch the simulated-time range."""
+    done = onebox("info", str(CAPTURE))
+    assert done.returncode == 0, done.stderr
+    assert "Simulated time:    1.800 s to 1.800 s (header stamps)" in done.stdout
+    path = tmp_path / "late.mcap"
+    old_tf = msgspec.structs.replace(
+        tf_static(),
+        transforms=[
+            msgspec.structs.replace(t, header=Header(stamp_ns=5_000_000_000, frame_id="world"))
+            for t in tf_static().transforms
+        ],
+    )
+    with RecordingWriter(path) as writer:
+        writer.add("tf_static", codec(TFMessage).encode(old_tf), log_time_ns=1)
+        writer.add("robot1/tf_static", codec(TFMessage).encode(tf_static()), log_time_ns=2)
+        for i, stamp_ns in enumerate((198_000_000_000, 209_600_000_000)):
+            for key, message in capture(stamp_ns).items():
+                writer.add(key, codec(type(message)).encode(message), log_time_ns=3 + i)
+        assert (writer.sim_start_ns, writer.sim_end_ns) == (198_000_000_000, 209_600_000_000)
+    info = describe(path)
+    assert (info.sim_start_ns, info.sim_end_ns) == (198_000_000_000, 209_600_000_000)
+    only_tf = tmp_path / "tf.mcap"
+    with RecordingWriter(only_tf) as writer:
+        writer.add("tf_static", codec(TFMessage).encode(tf_static()), log_time_ns=1)
+    assert "Simulated time" not in onebox("info", str(only_tf)).stdout

@@ -474,7 +474,7 @@ def test_info_lists_keys_counts_and_schemas(spaced_recording):
     text = result.stdout
     assert "Messages:          41" in text
     assert "Duration:          1.000000000 s" in text
-    assert "Simulated time:    0.000 s to 2.000 s" in text  # tf_static is stamped 0
+    assert "Simulated time:    0.100 s to 2.000 s" in text  # not tf_static's unstamped 0
     assert (
         "Key: camera/image_raw | Type: onebox.sensor.Image | Count: 20 | Encoding: msgpack"
         " | Schema: onebox.sensor.Image (jsonschema)" in " ".join(text.split())
