@@ -3,7 +3,9 @@
 Waits for one capture of the 80 x 60 basic camera (a colour and a depth picture with the same
 stamp) and prints:
 
-  1. the colour picture, one 24-bit coloured square a pixel;
+  1. the colour picture in 24-bit colour, two pixels a character cell (the half block ▀: the
+     upper pixel its foreground, the lower its background), so the 80 x 60 picture takes 80
+     columns and 30 lines; a wider picture is thinned to --columns (default 80);
   2. the depth picture the same way, in grey: near is bright, far is dark, and a pixel with no
      reading is dark blue;
   3. the depth readings, in metres, of a patch: by default rows 19-23 and columns 43-50, on the
@@ -14,8 +16,10 @@ stamp) and prints:
 
 Reads (under --namespace): CAMERA/image_raw (Image rgb8) and CAMERA/depth/image_raw (Image
 32FC1 metres, NaN = no reading), CAMERA being --camera (default basic_camera).
-Writes: the terminal only. Run it beside ``honcho start`` or ``onebox replay FILE.mcap``; when
-nothing arrives within --timeout-s it says how to start the simulation and exits 2.
+Writes: the terminal only. Run it beside ``honcho start``, or a replay of a recording that has
+the camera's keys (the committed capture has the main camera only: ``onebox replay
+tests/data/one_box.mcap --loop`` with ``onebox pixels --camera camera``); when nothing arrives
+within --timeout-s it says how to start the simulation and exits 2.
 Almost every modern terminal shows 24-bit colour; if yours prints strange characters, try
 another, or pass --no-pictures for the table alone.
 """
@@ -24,7 +28,9 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import threading
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -38,6 +44,11 @@ log = logging.getLogger("pixels")
 
 NO_READING_RGB = (20, 40, 160)
 RESET = "\x1b[0m"
+UPPER_HALF = "\u2580"
+"""▀: the foreground colours the upper half of the cell, the background the lower."""
+CAPTURE = "tests/data/one_box.mcap"
+COMMITTED_CAPTURE_CAMERA = "camera"
+"""The camera whose keys the committed capture holds (it has no basic_camera keys)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -64,6 +75,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--no-pictures", action="store_true", help="print only the table of depth readings"
     )
     parser.add_argument(
+        "--columns",
+        type=int,
+        default=80,
+        help="the most character columns a picture may take; a wider one is thinned (default 80)",
+    )
+    parser.add_argument(
         "--timeout-s",
         type=float,
         default=10.0,
@@ -72,18 +89,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     bus.add_arguments(parser)
 
 
-def squares(rgb: npt.NDArray[np.uint8]) -> str:
-    """A picture as rows of two-space squares on a 24-bit background colour."""
+def thinned(rgb: npt.NDArray[np.uint8], columns: int) -> npt.NDArray[np.uint8]:
+    """Every n-th pixel across and down, the smallest n that fits ``columns``."""
+    step = max(1, math.ceil(rgb.shape[1] / columns))
+    return rgb[::step, ::step]
+
+
+def half_blocks(rgb: npt.NDArray[np.uint8]) -> str:
+    """A picture as rows of ▀ cells, two pixel rows a line: upper pixel foreground, lower pixel
+    background, both 24-bit. An odd last row leaves the terminal's own background below it."""
     lines = []
-    for row in rgb:
+    for top in range(0, rgb.shape[0], 2):
+        upper = rgb[top].tolist()
+        lower: list[list[int]] | None = rgb[top + 1].tolist() if top + 1 < rgb.shape[0] else None
         parts = []
-        previous: tuple[int, int, int] | None = None
-        for r, g, b in row.tolist():
+        previous: tuple[int, ...] | None = None
+        for i, (r, g, b) in enumerate(upper):
+            colours: tuple[int, ...] = (r, g, b, *(lower[i] if lower is not None else ()))
             # Only a change of colour needs a new escape; a flat table stays short.
-            if (r, g, b) != previous:
-                parts.append(f"\x1b[48;2;{r};{g};{b}m")
-                previous = (r, g, b)
-            parts.append("  ")
+            if colours != previous:
+                escape = f"\x1b[38;2;{r};{g};{b}"
+                if lower is not None:
+                    escape += ";48;2;{};{};{}".format(*lower[i])
+                parts.append(escape + "m")
+                previous = colours
+            parts.append(UPPER_HALF)
         lines.append("".join(parts) + RESET)
     return "\n".join(lines)
 
@@ -171,24 +201,62 @@ def wait_for_capture(b: bus.Bus, camera: str, timeout_s: float) -> Capture:
         raise NothingArrived(
             f"no capture of {camera} within {timeout_s:g} s"
             + (f" (only {', '.join(got)})" if got else "")
-            + ": start the simulation with `honcho start` (or `onebox sim`), or replay one with "
-            "`onebox replay tests/data/one_box.mcap`, then run this again"
+            + f": {start_hint(camera)}"
         )
     return found[0]
 
 
+def start_hint(camera: str) -> str:
+    """How to get ``camera``'s pictures published; a replay only where the committed capture
+    has them."""
+    hint = "start the simulation with `honcho start` (or `onebox sim`), then run this again"
+    if camera == COMMITTED_CAPTURE_CAMERA:
+        return f"{hint}, or replay the committed capture with `onebox replay {CAPTURE} --loop`"
+    return (
+        f"{hint} (the committed capture has no {camera} keys: beside `onebox replay "
+        f"{CAPTURE} --loop`, run `onebox pixels --camera {COMMITTED_CAPTURE_CAMERA}`)"
+    )
+
+
+@dataclass(frozen=True)
+class PixelsSettings:
+    """Whose pictures ``onebox pixels`` prints, how wide, and which patch of readings."""
+
+    camera: str
+    rows: tuple[int, int]
+    cols: tuple[int, int]
+    pictures: bool
+    columns: int
+    timeout_s: float
+
+
+def settings_from(args: argparse.Namespace) -> PixelsSettings:
+    if args.columns < 1:
+        raise SettingError(f"--columns {args.columns}: must be 1 or more")
+    return PixelsSettings(
+        camera=args.camera,
+        rows=(int(args.rows[0]), int(args.rows[1])),
+        cols=(int(args.cols[0]), int(args.cols[1])),
+        pictures=not args.no_pictures,
+        columns=args.columns,
+        timeout_s=args.timeout_s,
+    )
+
+
 def main(args: argparse.Namespace) -> int:
-    rows = (int(args.rows[0]), int(args.rows[1]))
-    cols = (int(args.cols[0]), int(args.cols[1]))
-    with bus.open_bus(args, connect_timeout_s=args.timeout_s) as b:
-        capture = wait_for_capture(b, args.camera, args.timeout_s)
+    settings = settings_from(args)
+    rows, cols, camera = settings.rows, settings.cols, settings.camera
+    with bus.open_bus(args, connect_timeout_s=settings.timeout_s) as b:
+        capture = wait_for_capture(b, camera, settings.timeout_s)
     height, width = capture.depth_m.shape
     check_patch(capture.depth_m.shape, rows, cols)
-    if not args.no_pictures:
-        print(f"{args.camera}: {width} x {height}, colour at {capture.stamp_ns / 1e9:.3f} s")
-        print(squares(capture.rgb))
-        print(f"{args.camera}: depth (near = bright, no reading = blue)")
-        print(squares(depth_grey(capture.depth_m)))
-    print(f"{args.camera}: depth in metres, rows {rows[0]}-{rows[1]}, columns {cols[0]}-{cols[1]}")
+    if settings.pictures:
+        rgb = thinned(capture.rgb, settings.columns)
+        shown = f"shown {rgb.shape[1]} x {rgb.shape[0]}, " if rgb.shape[1] < width else ""
+        print(f"{camera}: {width} x {height}, {shown}colour at {capture.stamp_ns / 1e9:.3f} s")
+        print(half_blocks(rgb))
+        print(f"{camera}: depth (near = bright, no reading = blue)")
+        print(half_blocks(thinned(depth_grey(capture.depth_m), settings.columns)))
+    print(f"{camera}: depth in metres, rows {rows[0]}-{rows[1]}, columns {cols[0]}-{cols[1]}")
     print(patch_table(capture.depth_m, rows, cols))
     return 0
