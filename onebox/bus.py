@@ -154,17 +154,19 @@ class Qos:
     express: bool
 
 
-PICTURE_QOS = Qos(zenoh.CongestionControl.DROP, zenoh.Priority.DATA_LOW, express=True)
+PICTURE_QOS = Qos(zenoh.CongestionControl.DROP, zenoh.Priority.DATA, express=True)
 RELIABLE_QOS = Qos(zenoh.CongestionControl.BLOCK, zenoh.Priority.DATA, express=False)
 PICTURE_TYPES: tuple[type[Message], ...] = (Image, PointCloud)
 
 
 def qos(message_type: type[Message]) -> Qos:
-    """Pictures drop under congestion (newest wins) at low priority; everything else blocks.
+    """Pictures drop under congestion (newest wins); everything else blocks.
 
     A picture late is worth nothing, and a stalled link must not hold up anything else: it
-    goes out at once (express) on the lowest data priority, whose queue is apart from the
-    small reliable messages' queue, and is dropped when that queue stays full.
+    goes out at once (express) and is dropped when its queue stays full. It keeps the data
+    priority of the rest of its capture, so a capture's messages arrive in the order they were
+    sent (ground truth last); between hosts the routers move pictures to the lowest data
+    priority (config/router.json5), where small reliable messages overtake them.
     """
     return PICTURE_QOS if issubclass(message_type, PICTURE_TYPES) else RELIABLE_QOS
 
@@ -274,7 +276,9 @@ class RouterWatch:
     def __init__(self, session: zenoh.Session) -> None:
         self.lost = 0
         self.regained = 0
-        self._listener: Any = session.info.declare_transport_events_listener(self._on_event)
+        self._listener: Any = session.info.declare_transport_events_listener(
+            self._on_event, history=True
+        )
 
     def _on_event(self, event: zenoh.TransportEvent) -> None:
         transport = event.transport
@@ -283,9 +287,11 @@ class RouterWatch:
         if event.kind == zenoh.SampleKind.DELETE:
             self.lost += 1
             log.warning("lost router %s; reconnecting", transport.zid)
-        else:
+        elif self.lost:
             self.regained += 1
-            log.warning("router %s connected", transport.zid)
+            log.warning("router %s connected again", transport.zid)
+        else:
+            log.info("router %s connected", transport.zid)
 
     def close(self) -> None:
         self._listener.undeclare()

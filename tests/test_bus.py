@@ -3,14 +3,23 @@
 from __future__ import annotations
 
 import argparse
+import subprocess
 import threading
+from pathlib import Path
 
 import pytest
 import zenoh
 
 from onebox import bus, settings, sync
 from onebox.errors import SettingError
-from onebox.testing.processes import Inbox, bus_args, has_key
+from onebox.testing.processes import (
+    Inbox,
+    Processes,
+    bus_args,
+    free_port,
+    has_key,
+    wait_for_output,
+)
 from schemas import (
     CameraInfo,
     Clock,
@@ -66,7 +75,7 @@ def test_pictures_drop_and_small_messages_block(test_bus: bus.Bus) -> None:
     picture = test_bus.publisher("camera/depth/image_raw", Image)
     clock = test_bus.publisher("clock", Clock)
     assert picture._publisher.congestion_control == zenoh.CongestionControl.DROP
-    assert picture._publisher.priority == zenoh.Priority.DATA_LOW
+    assert picture._publisher.express
     assert clock._publisher.congestion_control == zenoh.CongestionControl.BLOCK
     assert clock._publisher.priority == zenoh.Priority.DATA
     for message_type in (Detection3DArray, TFMessage, CameraInfo, SupportPlane):
@@ -162,3 +171,60 @@ def test_router_env_moves_every_endpoint(monkeypatch: pytest.MonkeyPatch) -> Non
     assert "17999" in peer.get_json("connect/endpoints")
     assert "17999" in router.get_json("listen/endpoints")
     assert "17999" not in peer.get_json("listen/endpoints")
+
+
+def test_a_process_logs_losing_and_regaining_its_router() -> None:
+    """A locator whose router stops says so, and says so again when a router is back."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    procs = Processes(endpoint)
+    try:
+        router = procs.start("router", "--listen", endpoint, connect=False)
+        wait_for_output(router, "routing on", timeout_s=30)
+        locator = procs.start("locator")
+        wait_for_output(locator, "router", timeout_s=30)
+        procs.stop(router)
+        wait_for_output(locator, "lost router", timeout_s=30)
+        router = procs.start("router", "--listen", endpoint, connect=False)
+        wait_for_output(locator, "connected", timeout_s=30)
+        assert locator.poll() is None
+    finally:
+        procs.stop_all()
+
+
+def test_clients_that_come_and_go_leave_nothing_in_the_router(router: str) -> None:
+    """Clients sending 1280 x 720 depth map no shared memory into the router; its RSS stays flat."""
+    pid = _router_pid(router)
+
+    def clients_come_and_go(times: int) -> None:
+        for _ in range(times):
+            with bus.open_bus(bus_args(router)) as sub, bus.open_bus(bus_args(router)) as pub:
+                inbox = Inbox()
+                sub.subscribe_raw("camera/depth/image_raw", inbox)
+                p = pub.publisher("camera/depth/image_raw", Image)
+                assert p.wait_for_subscribers(10)
+                for _ in range(3):
+                    p.publish(Image(width=1280, height=720, data=bytes(1280 * 720 * 4)))
+                inbox.wait(has_key("camera/depth/image_raw", 1))
+
+    clients_come_and_go(2)
+    rss_before = _rss_mib(pid)
+    clients_come_and_go(8)
+    maps = Path(f"/proc/{pid}/maps").read_text()
+    assert "/dev/shm" not in maps, "the router maps shared memory from its clients"
+    assert _rss_mib(pid) - rss_before < 16, (rss_before, _rss_mib(pid))
+
+
+def _router_pid(endpoint: str) -> int:
+    """The pid of the process listening on ``endpoint``'s port (the test's private router)."""
+    port = int(endpoint.rsplit(":", 1)[1])
+    out = subprocess.run(
+        ["ss", "-Htlnp", f"sport = :{port}"], capture_output=True, text=True, check=True
+    ).stdout
+    return int(out.split("pid=", 1)[1].split(",", 1)[0])
+
+
+def _rss_mib(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    raise AssertionError(f"no VmRSS for {pid}")

@@ -1,0 +1,167 @@
+"""Network figures: shared memory's latency against the memory it holds, and (as root, in
+network namespaces) hosts that lose their link.
+
+    .venv/bin/python benchmarks/bench_network.py shm            # seconds, any user
+    .venv/bin/python benchmarks/bench_network.py hosts --runs 20  # root: ip netns, minutes
+
+``shm``: a depth picture (32FC1) sent from one client to another through a private router,
+p50 and p95 publish -> callback, with Zenoh's shared-memory transport on and off, and what
+/dev/shm and the router's RSS hold afterwards.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import statistics
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import zenoh
+
+from onebox import bus
+from onebox.testing.processes import Processes, free_port
+
+
+def shm_bytes() -> int:
+    """Bytes held in /dev/shm (every file, as the kernel counts blocks)."""
+    total = 0
+    for entry in os.scandir("/dev/shm"):
+        with contextlib.suppress(OSError):
+            total += entry.stat(follow_symlinks=False).st_blocks * 512
+    return total
+
+
+def rss_bytes(pid: int) -> int:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) * 1024
+    return 0
+
+
+@contextlib.contextmanager
+def router(shm: bool) -> Iterator[tuple[str, subprocess.Popen[str]]]:
+    """A private router with shared memory on or off."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    procs = Processes(endpoint)
+    env = {"ONEBOX_LOG": "WARNING"}
+    config = _config_file(bus.ROUTER_CONFIG, shm)
+    proc = procs.start(
+        "router", "--listen", endpoint, "--config", str(config), env=env, connect=False
+    )
+    _wait_port(endpoint)
+    try:
+        yield endpoint, proc
+    finally:
+        procs.stop_all()
+
+
+def _config_file(base: Path, shm: bool) -> Path:
+    """``base`` with shared memory switched on or off, written beside the others in /tmp."""
+    config = zenoh.Config.from_file(str(base))
+    config.insert_json5("transport/shared_memory/enabled", "true" if shm else "false")
+    path = Path(f"/tmp/onebox-bench-{base.stem}-shm-{shm}.json5")
+    path.write_text(str(config))
+    return path
+
+
+def _wait_port(endpoint: str) -> None:
+    import socket
+
+    host, port = endpoint.removeprefix("tcp/").rsplit(":", 1)
+    deadline = time.monotonic() + 15
+    while time.monotonic() < deadline:
+        try:
+            with socket.create_connection((host, int(port)), timeout=0.2):
+                return
+        except OSError:
+            time.sleep(0.05)
+    raise RuntimeError(f"no router at {endpoint}")
+
+
+def client(endpoint: str, shm: bool) -> zenoh.Session:
+    config = zenoh.Config.from_file(str(_config_file(bus.CLIENT_CONFIG, shm)))
+    config.insert_json5("connect/endpoints", f'["{endpoint}"]')
+    return zenoh.open(config)
+
+
+def latency_ms(endpoint: str, shm: bool, size: int, count: int) -> list[float]:
+    """Publish ``count`` pictures of ``size`` bytes one at a time; time each to the callback."""
+    arrived = threading.Event()
+    got: list[float] = []
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        got.append(time.perf_counter())
+        arrived.set()
+
+    with client(endpoint, shm) as sub_session, client(endpoint, shm) as pub_session:
+        sub = sub_session.declare_subscriber("bench/depth", on_sample)
+        pub = bus.Publisher(
+            "bench/depth",
+            bus.PICTURE_TYPES[0],
+            pub_session.declare_publisher(
+                "bench/depth", congestion_control=zenoh.CongestionControl.BLOCK, express=True
+            ),
+        )
+        assert pub.wait_for_subscribers(10), "no subscriber"
+        payload = os.urandom(size)
+        times = []
+        for _ in range(count):
+            arrived.clear()
+            start = time.perf_counter()
+            pub.publish_bytes(payload)
+            if not arrived.wait(5):
+                continue
+            times.append((got[-1] - start) * 1000)
+        sub.undeclare()
+    return times
+
+
+def bench_shm(count: int, restarts: int) -> None:
+    print("shared memory: depth 32FC1 client -> router -> client, one at a time")
+    print(f"{'picture':>10} {'shm':>4} {'p50 ms':>8} {'p95 ms':>8}")
+    for width, height in ((640, 480), (1280, 720)):
+        for shm in (False, True):
+            with router(shm) as (endpoint, _):
+                times = sorted(latency_ms(endpoint, shm, width * height * 4, count))
+            p50 = statistics.median(times)
+            p95 = times[int(0.95 * (len(times) - 1))]
+            print(f"{width}x{height:<5} {'on' if shm else 'off':>4} {p50:8.2f} {p95:8.2f}")
+    print(f"\nwhat restarts leave: {restarts} client pairs started and stopped beside one router")
+    header = f"{'/dev/shm before':>16} {'after':>10} {'router RSS before':>18} {'after':>10}"
+    print(f"{'shm':>4} {header}")
+    for shm in (False, True):
+        with router(shm) as (endpoint, proc):
+            latency_ms(endpoint, shm, 1280 * 720 * 4, 5)
+            shm0, rss0 = shm_bytes(), rss_bytes(proc.pid)
+            for _ in range(restarts):
+                latency_ms(endpoint, shm, 1280 * 720 * 4, 5)
+            shm1, rss1 = shm_bytes(), rss_bytes(proc.pid)
+        mib = 1 << 20
+        print(
+            f"{'on' if shm else 'off':>4} {shm0 / mib:13.1f} MiB {shm1 / mib:6.1f} MiB "
+            f"{rss0 / mib:15.1f} MiB {rss1 / mib:6.1f} MiB"
+        )
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    sub = parser.add_subparsers(dest="what", required=True)
+    shm = sub.add_parser("shm", help="shared memory on and off")
+    shm.add_argument("--count", type=int, default=200)
+    shm.add_argument("--restarts", type=int, default=10)
+    args = parser.parse_args()
+    if args.what == "shm":
+        bench_shm(args.count, args.restarts)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
