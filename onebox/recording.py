@@ -673,12 +673,14 @@ class ByteBudgetQueue:
         self._bytes = 0
         self._budget_bytes = budget_bytes
         self._ready = threading.Condition()
+        self._closed = False
         self.dropped: dict[str, int] = {}
 
     def put(self, key: str, payload: bytes) -> bool:
-        """Queue ``payload`` stamped with the time now; False (and counted) when over budget."""
+        """Queue ``payload`` stamped with the time now; False (and counted) when over budget
+        or closed."""
         with self._ready:
-            if self._bytes + len(payload) > self._budget_bytes and self._bytes:
+            if self._closed or (self._bytes + len(payload) > self._budget_bytes and self._bytes):
                 self.dropped[key] = self.dropped.get(key, 0) + 1
                 return False
             self._items.append((key, time.time_ns(), payload))
@@ -693,6 +695,13 @@ class ByteBudgetQueue:
                 return []
             items, self._items = self._items, []
             return items
+
+    def close(self) -> None:
+        """Take nothing more and let go of what is queued (the writer stopped for good)."""
+        with self._ready:
+            self._closed = True
+            self._items = []
+            self._bytes = 0
 
     def release(self, nbytes: int) -> None:
         """The writer has written ``nbytes`` of what it took; make room for that much."""

@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import logging
 import time
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
@@ -87,15 +88,34 @@ def point_cloud(
     )
 
 
+@dataclass(frozen=True)
+class PointsSettings:
+    """What ``onebox points`` was asked to do, checked."""
+
+    slop_ns: int
+    frames: int | None
+    log_interval_s: float
+
+    @classmethod
+    def from_args(cls, args: argparse.Namespace) -> PointsSettings:
+        if not args.slop_ms >= 0:
+            raise SettingError(f"--slop-ms {args.slop_ms}: must be 0 or more")
+        if not args.log_interval_s > 0:
+            raise SettingError(f"--log-interval-s {args.log_interval_s}: must be above 0")
+        if args.frames is not None and args.frames < 1:
+            raise SettingError(f"--frames {args.frames}: must be at least 1")
+        return cls(round(args.slop_ms * 1e6), args.frames, args.log_interval_s)
+
+
 class Points:
     """Decodes in the Zenoh callbacks, matches by stamp, builds clouds on the main thread."""
 
-    def __init__(self, b: bus.Bus, args: argparse.Namespace) -> None:
+    def __init__(self, b: bus.Bus, config: PointsSettings) -> None:
         self._bus = b
-        self._report = sync.ReportLimiter(log, interval_s=args.log_interval_s)
+        self._report = sync.ReportLimiter(log, interval_s=config.log_interval_s)
         self._matcher = StampMatcher(
             ["depth", "colour", "info"],
-            slop_ns=round(args.slop_ms * 1e6),
+            slop_ns=config.slop_ns,
             on_unmatched=self._unmatched,
         )
         self._matched: sync.NewestQueue[dict[str, Stamped]] = sync.NewestQueue(maxlen=2)
@@ -182,16 +202,15 @@ class Points:
 
 def main(args: argparse.Namespace) -> int:
     """Turn every matched depth + colour + camera info into camera/points."""
-    if args.slop_ms < 0:
-        raise SettingError(f"--slop-ms {args.slop_ms}: must be 0 or more")
+    config = PointsSettings.from_args(args)
     with bus.open_bus(args) as b:
-        points = Points(b, args)
+        points = Points(b, config)
         points.subscribe()
         log.info(
             "clouds from %s and %s on %s", b.key(DEPTH_KEY), b.key(COLOUR_KEY), b.key(POINTS_KEY)
         )
         try:
-            points.run(args.frames, args.log_interval_s)
+            points.run(config.frames, config.log_interval_s)
         finally:
             log.info("published %d point clouds", points.published)
     return 0

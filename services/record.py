@@ -2,7 +2,7 @@
 
     onebox record OUT.mcap                       every key (``**`` under the namespace)
     onebox record OUT.mcap --keys 'camera/**' --keys tf_static
-    onebox record OUT.mcap --compression zstd --duration 10
+    onebox record OUT.mcap --compression none --duration 10
 
 Reads: every key matching ``--keys`` (default ``**``), any type; ``tf_static`` and other latched
 keys are asked for their last sample, so a recorder started late still records them.
@@ -11,10 +11,17 @@ msgpack, schema encoding jsonschema with the key's msgspec JSON schema (a key on
 know is recorded with no schema). The bytes written are the bytes that travelled; log time is
 the arrival time (wall clock), publish time the header stamp (simulated time).
 
+Chunks are compressed with zstd by default, as the MCAP C++ writer does (``--compression none``
+or ``lz4`` to choose otherwise); every chunk carries its checksum.
+
 The Zenoh callback only stamps and queues each message; a writer thread writes chunks straight
 to the file and closes a chunk at least every ``--flush-interval-s``, so a ``kill -9`` loses at
 most the chunk being built. Ctrl-C, SIGTERM and ``--duration`` finish the file with its summary.
 If the disk falls more than ``--queue-mb`` behind, new messages are dropped and counted per key.
+A message whose stamp MCAP cannot hold (below 0, say) is recorded with its time held to the
+nearest MCAP can store, and said once per key. If the writer stops (a full disk), the recorder
+says so in one line, closes the file after its last whole chunk so that it reads back, and
+exits 2 at once.
 Refuses to overwrite OUT.mcap unless ``--overwrite``. On a terminal, a progress line shows
 messages and MB so far, per key.
 """
@@ -31,6 +38,7 @@ import sys
 import threading
 import time
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from types import FrameType
 from typing import TextIO
@@ -60,8 +68,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     settings.add(
         parser,
         "compression",
-        "none",
-        f"compress each chunk: {', '.join(COMPRESSIONS)}",
+        "zstd",
+        f"compress each chunk: {', '.join(COMPRESSIONS)} (zstd, as MCAP's C++ writer does)",
     )
     settings.add(parser, "chunk_size_mb", 4.0, "close a chunk once it holds this many MB")
     settings.add(
@@ -156,7 +164,8 @@ class Recorder:
         self.progress = Progress(sys.stderr, writer.path)
         self._flush_interval_s = flush_interval_s
         self._stop = threading.Event()
-        self._failed: BaseException | None = None
+        self.failed: BaseException | None = None
+        """Why the writer thread stopped early, if it did."""
         self._thread = threading.Thread(target=self._run, name="mcap-writer", daemon=True)
 
     def on_sample(self, key: str, payload: bytes) -> None:
@@ -181,13 +190,13 @@ class Recorder:
                     last_flush = time.monotonic()
                 if stopping and not items:
                     return
-        except OSError as e:  # a full or vanished disk: stop writing, report it from main
-            self._failed = e
+        except BaseException as e:  # any end of the writer must end the recorder
+            self.failed = e
+            self.queue.close()  # nothing more is queued: memory cannot grow while we stop
 
-    def check(self) -> None:
-        """Raise in the main thread if the writer thread failed."""
-        if self._failed is not None:
-            raise RecordingError(f"cannot write {self.writer.path}: {self._failed}")
+    @property
+    def running(self) -> bool:
+        return self.failed is None
 
     def stop(self) -> None:
         """Write everything still queued, then return (the caller finishes the file)."""
@@ -215,50 +224,102 @@ def finishing(path: Path) -> Iterator[None]:
                 signal.signal(sig, handler)
 
 
-def main(args: argparse.Namespace) -> int:
-    exprs = key_expressions(args.keys)
-    if args.out.exists() and not args.overwrite:  # say so before connecting to anything
-        raise RecordingError(
-            f"{args.out} already exists: delete it, choose another name, or pass --overwrite"
+@dataclass(frozen=True)
+class RecordSettings:
+    """What ``onebox record`` was asked to do, checked."""
+
+    out: Path
+    exprs: list[str]
+    overwrite: bool
+    compression: str
+    chunk_size_bytes: int
+    flush_interval_s: float
+    queue_bytes: int
+    duration_s: float | None
+
+    @classmethod
+    def from_args(cls, args: argparse.Namespace) -> RecordSettings:
+        if args.chunk_size_mb <= 0 or args.flush_interval_s <= 0 or args.queue_mb <= 0:
+            raise RecordingError(
+                "--chunk-size-mb, --flush-interval-s and --queue-mb must be more than 0"
+            )
+        if args.compression not in COMPRESSIONS:
+            raise RecordingError(
+                f"--compression {args.compression!r}: choose one of {', '.join(COMPRESSIONS)}"
+            )
+        if args.duration is not None and args.duration <= 0:
+            raise RecordingError(f"--duration {args.duration}: must be more than 0 seconds")
+        return cls(
+            out=args.out,
+            exprs=key_expressions(args.keys),
+            overwrite=args.overwrite,
+            compression=args.compression,
+            chunk_size_bytes=int(args.chunk_size_mb * MB),
+            flush_interval_s=args.flush_interval_s,
+            queue_bytes=int(args.queue_mb * MB),
+            duration_s=args.duration,
         )
-    if args.chunk_size_mb <= 0 or args.flush_interval_s <= 0 or args.queue_mb <= 0:
+
+
+def _stopped(recorder: Recorder, writer: RecordingWriter) -> RecordingError:
+    """The one line for a writer thread that ended early."""
+    failed = recorder.failed
+    if isinstance(failed, OSError) and writer.failed is not None:
+        # A full or vanished disk: finish() closes the file by hand and says how.
+        try:
+            writer.finish()
+        except RecordingError as e:
+            return e
+    with contextlib.suppress(OSError, RecordingError):
+        writer.finish()
+    return RecordingError(
+        f"stopped recording {writer.path}: the writer failed with {type(failed).__name__}: "
+        f"{failed}; the file holds what was written before"
+    )
+
+
+def main(args: argparse.Namespace) -> int:
+    config = RecordSettings.from_args(args)
+    if config.out.exists() and not config.overwrite:  # say so before connecting to anything
         raise RecordingError(
-            "--chunk-size-mb, --flush-interval-s and --queue-mb must be more than 0"
+            f"{config.out} already exists: delete it, choose another name, or pass --overwrite"
         )
     with bus.open_bus(args) as b:
         writer = RecordingWriter(
-            args.out,
+            config.out,
             namespace=b.namespace,
-            compression=args.compression,
-            chunk_size_bytes=int(args.chunk_size_mb * MB),
-            overwrite=args.overwrite,
+            compression=config.compression,
+            chunk_size_bytes=config.chunk_size_bytes,
+            overwrite=config.overwrite,
         )
-        recorder = Recorder(writer, int(args.queue_mb * MB), args.flush_interval_s)
+        recorder = Recorder(writer, config.queue_bytes, config.flush_interval_s)
         try:
             recorder.start()
-            for expr in exprs:
+            for expr in config.exprs:
                 b.subscribe_raw(expr, recorder.on_sample, history=True)
             log.info(
-                "recording %s into %s (Ctrl-C to stop)",
-                ", ".join(b.key(e) for e in exprs),
-                args.out,
+                "recording %s into %s, %s (Ctrl-C to stop)",
+                ", ".join(b.key(e) for e in config.exprs),
+                config.out,
+                "uncompressed" if config.compression == "none" else f"{config.compression} chunks",
             )
-            deadline = None if args.duration is None else time.monotonic() + args.duration
+            deadline = None if config.duration_s is None else time.monotonic() + config.duration_s
             try:
-                while deadline is None or time.monotonic() < deadline:
-                    recorder.check()
+                while recorder.running and (deadline is None or time.monotonic() < deadline):
                     recorder.progress.draw(recorder.queue.dropped)
-                    time.sleep(0.1)
+                    time.sleep(0.1)  # the progress line's pace; the writer runs on its own
             except KeyboardInterrupt:
                 pass  # Ctrl-C and SIGTERM end the recording; the file is finished below
         finally:
-            with finishing(args.out):
+            with finishing(config.out):
                 b.close()  # no more samples after this, so the queue can only drain
                 recorder.stop()
                 recorder.progress.draw(recorder.queue.dropped, force=True)
                 recorder.progress.end()
-                writer.finish()
-    recorder.check()
+                if recorder.running:
+                    writer.finish()
+        if not recorder.running:
+            raise _stopped(recorder, writer)
     dropped = recorder.queue.dropped
     log.info("%s", recorder.progress.line(dropped))
     if dropped:

@@ -25,8 +25,8 @@ import logging
 import sys
 import time
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import zenoh
 
@@ -173,38 +173,59 @@ def wait_for_subscribers(b: bus.Bus, timeout_s: float) -> bool:
     """Wait until this session knows of a subscriber to any key, at most ``timeout_s``.
 
     A new session learns the routes to existing subscribers a few ms after it opens; what it
-    publishes before that reaches nobody, which would cost a replay its first messages.
+    publishes before that reaches nobody, which would cost a replay its first messages. A
+    publisher on ``**`` matches a subscriber on any key.
     """
-    # zenoh's stubs call matching_status a bool; at run time it is a MatchingStatus.
-    probe: Any = b.session.declare_publisher(b.key("**"))
-    try:
-        deadline = time.monotonic() + timeout_s
-        while not probe.matching_status.matching:
-            if time.monotonic() >= deadline:
-                return False
-            time.sleep(0.01)  # polling the matching status; zenoh-python has no wait for it
-        return True
-    finally:
-        probe.undeclare()
+    return b.publisher("**", Message).wait_for_subscribers(timeout_s)
+
+
+@dataclass(frozen=True)
+class ReplaySettings:
+    """What ``onebox replay`` was asked to do, checked."""
+
+    path: Path
+    rate: float
+    loop: bool
+    exprs: list[str] | None
+    clock: bool
+    wait_s: float
+    recover: bool
+
+    @classmethod
+    def from_args(cls, args: argparse.Namespace) -> ReplaySettings:
+        if not args.rate >= 0 or args.rate == float("inf"):
+            raise RecordingError(f"--rate {args.rate}: must be 0 (as fast as possible) or more")
+        if not args.wait_s >= 0:
+            raise RecordingError(f"--wait-s {args.wait_s}: must be 0 or more seconds")
+        return cls(
+            path=args.file,
+            rate=args.rate,
+            loop=args.loop,
+            exprs=args.keys,
+            clock=not args.no_clock,
+            wait_s=args.wait_s,
+            recover=args.recover,
+        )
 
 
 def main(args: argparse.Namespace) -> int:
-    path: Path = args.file
-    info = describe(path, recover=args.recover)
+    config = ReplaySettings.from_args(args)
+    path = config.path
+    info = describe(path, recover=config.recover)
     recorded_keys = [k.key for k in info.keys]
-    keys = selected(recorded_keys, args.keys)
+    keys = selected(recorded_keys, config.exprs)
     has_clock = any(is_key(k, CLOCK) for k in recorded_keys)
-    if has_clock and not args.no_clock:
+    if has_clock and config.clock:
         keys = sorted(set(keys) | {k for k in recorded_keys if is_key(k, CLOCK)})
     if not keys:
         raise RecordingError(
-            f"{path} has no key matching {' '.join(args.keys or [])}: it has "
+            f"{path} has no key matching {' '.join(config.exprs or [])}: it has "
             f"{', '.join(recorded_keys) or 'no messages'}"
         )
-    pacer = Pacer(args.rate)
-    loop_gap_s = loop_gap(info.duration_s, info.message_count, args.rate)
-    if has_clock or args.no_clock:
-        how = "as recorded" if has_clock and not args.no_clock else "off"
+    pacer = Pacer(config.rate)
+    loop_gap_s = loop_gap(info.duration_s, info.message_count, config.rate)
+    if has_clock or not config.clock:
+        how = "as recorded" if has_clock and config.clock else "off"
     else:
         how = "synthesised from the header stamps"
     log.info(
@@ -213,28 +234,28 @@ def main(args: argparse.Namespace) -> int:
         len(keys),
         sum(k.count for k in info.keys if k.key in keys),
         info.duration_s,
-        args.rate,
+        config.rate,
         how,
     )
     with bus.open_bus(args) as b:
-        if not wait_for_subscribers(b, args.wait_s):
-            log.info("no subscriber yet after %g s; replaying anyway", args.wait_s)
+        if not wait_for_subscribers(b, config.wait_s):
+            log.info("no subscriber yet after %g s; replaying anyway", config.wait_s)
         publishers: dict[str, bus.Publisher[Message]] = {}
         clock = None
-        if not has_clock and not args.no_clock:
+        if not has_clock and config.clock:
             clock = b.publisher(CLOCK, Clock, congestion_control=zenoh.CongestionControl.BLOCK)
         passes = 0
         try:
             while True:
                 if passes:
                     time.sleep(loop_gap_s)  # pacing between passes, as between messages
-                messages = iter_messages(path, keys, recover=args.recover)
+                messages = iter_messages(path, keys, recover=config.recover)
                 count = replay_once(b, messages, publishers, pacer, clock)
                 passes += 1
                 if sys.stderr.isatty():
                     sys.stderr.write(f"\r\x1b[K{path}: pass {passes}, {count} messages")
                     sys.stderr.flush()
-                if not args.loop:
+                if not config.loop:
                     break
         except KeyboardInterrupt:
             pass  # Ctrl-C or SIGTERM: stop replaying; the session closes below

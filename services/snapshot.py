@@ -17,10 +17,11 @@ import argparse
 import logging
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from onebox import bus, settings
-from onebox.errors import NothingArrived, RecordingError
+from onebox.errors import NothingArrived, RecordingError, SettingError
 from onebox.recording import RecordingWriter, stamp_ns
 
 log = logging.getLogger("snapshot")
@@ -91,9 +92,25 @@ class CaptureCollector:
             return [k for k in self._camera_keys if k not in best]
 
 
+@dataclass(frozen=True)
+class SnapshotSettings:
+    """What ``onebox snapshot`` was asked to do, checked."""
+
+    out: Path
+    overwrite: bool
+    timeout_s: float
+
+    @classmethod
+    def from_args(cls, args: argparse.Namespace) -> SnapshotSettings:
+        if not args.timeout_s > 0:
+            raise SettingError(f"--timeout-s {args.timeout_s}: must be more than 0 seconds")
+        return cls(out=args.out, overwrite=args.overwrite, timeout_s=args.timeout_s)
+
+
 def main(args: argparse.Namespace) -> int:
-    out: Path = args.out
-    if out.exists() and not args.overwrite:
+    config = SnapshotSettings.from_args(args)
+    out = config.out
+    if out.exists() and not config.overwrite:
         raise RecordingError(
             f"{out} already exists: delete it first, choose another name, or pass --overwrite"
         )
@@ -106,15 +123,17 @@ def main(args: argparse.Namespace) -> int:
         b.subscribe_raw(TF_STATIC, on_sample, history=True)
         for key in CAMERA_KEYS:
             b.subscribe_raw(key, on_sample)
-        log.info("waiting up to %.0f s for one capture", args.timeout_s)
-        if not collector.done.wait(args.timeout_s):
+        log.info("waiting up to %.0f s for one capture", config.timeout_s)
+        if not collector.done.wait(config.timeout_s):
             endpoints = ", ".join(args.connect or [bus.DEFAULT_ENDPOINT])
             raise NothingArrived(
-                f"no whole capture within {args.timeout_s:g} s on {endpoints} (missing "
+                f"no whole capture within {config.timeout_s:g} s on {endpoints} (missing "
                 f"{', '.join(collector.missing())}): is `onebox sim` running there?"
             )
     ordered = sorted(collector.capture.items(), key=lambda item: item[1][0])
-    with RecordingWriter(out, namespace=b.namespace, overwrite=args.overwrite) as writer:
+    with RecordingWriter(
+        out, namespace=b.namespace, compression="zstd", overwrite=config.overwrite
+    ) as writer:
         for key, (log_time_ns, payload) in ordered:
             writer.add(key, payload, log_time_ns)
     camera_stamp = stamp_ns(collector.capture[b.key(CAMERA_KEYS[0])][1])

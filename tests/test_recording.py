@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import itertools
 import json
 import signal
 import subprocess
@@ -16,16 +15,18 @@ import pytest
 import zenoh
 from mcap.reader import make_reader
 
+from onebox import bus
 from onebox.errors import RecordingError
 from onebox.keys import type_for_key
 from onebox.recording import RecordingWriter, describe, iter_messages, read_capture
-from onebox.testing.capture import CAPTURE, load_capture
+from onebox.testing.capture import load_capture
 from onebox.testing.processes import ROOT, Inbox, has_key
 from schemas import (
     CameraInfo,
     Clock,
     Header,
     Image,
+    Message,
     TFMessage,
     Transform,
     TransformStamped,
@@ -72,16 +73,11 @@ CAMERA = {
 }
 
 
-def wait_matching(session: zenoh.Session, key: str, timeout_s: float = 15.0) -> None:
+def wait_matching(b: bus.Bus, key: str, timeout_s: float = 15.0) -> None:
     """Block until some subscriber on ``key`` is known (the process under test is listening)."""
-    probe = session.declare_publisher(key)
-    try:
-        deadline = time.monotonic() + timeout_s
-        while not probe.matching_status.matching:
-            assert time.monotonic() < deadline, f"no subscriber on {key} within {timeout_s} s"
-            time.sleep(0.02)
-    finally:
-        probe.undeclare()
+    assert b.publisher(key, Message).wait_for_subscribers(timeout_s), (
+        f"no subscriber on {key} within {timeout_s} s"
+    )
 
 
 def wait_file(condition: Any, timeout_s: float = 15.0) -> None:
@@ -171,7 +167,7 @@ def test_record_is_byte_identical_in_order_and_self_describing(processes, test_b
         for k in CAMERA
     }
     for key in CAMERA:
-        wait_matching(test_bus.session, key)
+        wait_matching(test_bus, key)
     sent: dict[str, list[bytes]] = {k: [] for k in CAMERA}
     for i in range(20):
         for key, make in CAMERA.items():
@@ -204,7 +200,7 @@ def test_record_a_running_sim(processes, test_bus, tmp_path):
     seen = Inbox()
     test_bus.subscribe_raw("**", seen)
     rec = processes.start("record", str(out), "--flush-interval-s", "0.2")
-    wait_matching(test_bus.session, "camera/image_raw")
+    wait_matching(test_bus, "camera/image_raw")
     sim = processes.start("sim", "--frames", "5")
     seen.wait(has_key("sim/ground_truth", 5), timeout_s=60)
     assert sim.wait(timeout=30) == 0
@@ -265,7 +261,7 @@ def test_sigkill_keeps_every_complete_chunk_and_sigterm_finishes(processes, test
         for key in keys.values()
     }
     for key in keys.values():
-        wait_matching(test_bus.session, key)
+        wait_matching(test_bus, key)
     sent: list[bytes] = []
 
     def publish(n: int) -> None:
@@ -333,7 +329,7 @@ def test_snapshot_records_one_matched_capture(processes, test_bus, tmp_path):
     pubs = {k: test_bus.publisher(k, Image) for k in CAMERA}
     snap = processes.start("snapshot", str(out), "--timeout-s", "20")
     for key in CAMERA:
-        wait_matching(test_bus.session, key)
+        wait_matching(test_bus, key)
     # A capture whose depth never comes first; the snapshot must not take it.
     pubs["camera/image_raw"].publish_bytes(image(5, 5))
     pubs["camera/camera_info"].publish_bytes(info(5))
@@ -367,6 +363,8 @@ def test_snapshot_says_what_never_arrived(processes, tmp_path):
 
 
 SPACING_S = 0.05
+FIRST_LATE_S = 0.25
+"""How much later than the rest the first message may arrive (its delivery, not the pacing)."""
 
 
 @pytest.fixture
@@ -405,10 +403,14 @@ def test_replay_keeps_bytes_order_and_spacing(processes, test_bus, spaced_record
     assert data == messages
     clocks = [codec(Clock).decode(p).clock_ns for k, p, _ in arrivals if k == "clock"]
     assert clocks == [100_000_000 * (i + 1) for i in range(20)]
+    # What replay promises, which a loaded machine cannot break: no message leaves before its
+    # recorded offset (a late first arrival is the only slack), and the whole pass is not
+    # much slower than recorded.
     times = [t for k, _, t in arrivals if k == "camera/image_raw"]
-    gaps = [b - a for a, b in itertools.pairwise(times)]
-    assert abs(sum(gaps) / len(gaps) - SPACING_S) < 0.01
-    assert max(abs(g - SPACING_S) for g in gaps) < 0.04
+    offsets = [i * SPACING_S for i in range(len(times))]
+    early = [(t - times[0]) - offset for t, offset in zip(times, offsets, strict=True)]
+    assert min(early) > -FIRST_LATE_S, early
+    assert times[-1] - times[0] < offsets[-1] + 5.0
 
 
 def test_replay_rate_zero_is_faster_and_late_joiner_gets_tf_static(
@@ -501,8 +503,6 @@ def test_recover_reads_a_cut_file_and_info_says_so(spaced_recording, tmp_path):
 
 def test_committed_capture_loads_as_typed_messages():
     """tests/data/one_box.mcap holds one capture: colour, depth and info of one stamp, tf_static."""
-    if not CAPTURE.exists():
-        pytest.skip("tests/data/one_box.mcap is not recorded yet")
     capture = load_capture()
     assert sorted(capture) == ["camera/camera_info", "camera/depth/image_raw",
                                "camera/image_raw", "tf_static"]  # fmt: skip
@@ -513,3 +513,89 @@ def test_committed_capture_loads_as_typed_messages():
     assert (colour.encoding, depth.encoding) == ("rgb8", "32FC1")
     assert len(colour.data) == colour.step * colour.height
     assert isinstance(capture["tf_static"], TFMessage) and capture["tf_static"].transforms
+
+
+# --- stamps MCAP cannot hold, a full disk --------------------------------------------------------
+
+
+def test_negative_and_huge_stamps_are_recorded_and_said_once(processes, test_bus, tmp_path):
+    """Clock(-1), a header stamp below 0 and one of 2^64 - 1: every message is recorded, the
+    writer keeps going, and the log says once per key what it changed."""
+    out = tmp_path / "stamps.mcap"
+    rec = processes.start("record", str(out), "--flush-interval-s", "0.2")
+    clock = test_bus.publisher("clock", Clock, congestion_control=zenoh.CongestionControl.BLOCK)
+    colour = test_bus.publisher(
+        "camera/image_raw", Image, congestion_control=zenoh.CongestionControl.BLOCK
+    )
+    wait_matching(test_bus, "clock")
+    wait_matching(test_bus, "camera/image_raw")
+    sent = [
+        ("clock", clock.publish(Clock(clock_ns=-1))),
+        ("clock", clock.publish(Clock(clock_ns=-(2**63)))),
+        ("clock", clock.publish(Clock(clock_ns=-7))),
+    ]
+    for stamp in (-5, 2**64 - 1):
+        colour.publish_bytes(image(stamp, 1))
+        sent.append(("camera/image_raw", image(stamp, 1)))
+    for i in range(5):
+        sent.append(("clock", clock.publish(Clock(clock_ns=i))))
+        payload = image(i, i)
+        colour.publish_bytes(payload)
+        sent.append(("camera/image_raw", payload))
+    wait_file(lambda: len(_recovered(out)) == len(sent))
+    output = processes.stop(rec)
+    assert rec.returncode == 0, output
+    recorded = list(iter_messages(out))
+    assert sorted((r.key, r.payload) for r in recorded) == sorted(sent)
+    assert [r.publish_time_ns for r in recorded if r.key == "clock"][:2] == [0, 0]
+    assert output.count("clock: a publish time of") == 1, output  # once, for three
+    assert "camera/image_raw: a publish time of -5 ns" in output
+    assert "Traceback" not in output
+
+
+@pytest.fixture
+def small_disk(tmp_path) -> Any:
+    """A 3 MB tmpfs, so a recording fills it; skipped where it cannot be mounted."""
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    mounted = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", "size=3m", "tmpfs", str(disk)],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    if mounted.returncode != 0:
+        pytest.skip(f"cannot mount a small tmpfs to fill ({mounted.stderr.strip()}): needs root")
+    try:
+        yield disk
+    finally:
+        subprocess.run(["umount", "-l", str(disk)], check=False)
+
+
+def test_a_full_disk_gives_one_line_exit_2_and_a_file_that_reads_back(
+    processes, test_bus, small_disk
+):
+    """The disk fills: one line naming the file, exit 2 at once, and the file reads back
+    without --recover, holding what fitted."""
+    out = small_disk / "full.mcap"
+    rec = processes.start(
+        "record", str(out), "--compression", "none", "--chunk-size-mb", "0.25",
+        "--flush-interval-s", "0.1",
+    )  # fmt: skip
+    colour = test_bus.publisher(
+        "camera/image_raw", Image, congestion_control=zenoh.CongestionControl.BLOCK
+    )
+    wait_matching(test_bus, "camera/image_raw")
+    sent = 0
+    deadline = time.monotonic() + 60
+    while rec.poll() is None and time.monotonic() < deadline:
+        sent += 1
+        colour.publish_bytes(image(sent, sent, w=160, h=120))  # 57 kB each
+    output = processes.stop(rec)
+    assert rec.returncode == 2, output
+    assert "Traceback" not in output
+    [line] = [line for line in output.splitlines() if line.startswith("onebox record:")]
+    assert f"cannot write {out}" in line and "No space left" in line, line
+    assert "reads back as it is" in line, line
+    recorded = list(iter_messages(out))
+    assert 10 < len(recorded) < sent
