@@ -4,7 +4,7 @@ from schemas.base import Header, Message
 from schemas.codec import Codec, codec, json_schema, type_name
 from schemas.geometry import Pose, Quaternion, TFMessage, Transform, TransformStamped, Vector3
 from schemas.sensor import FLOAT32, UINT32, CameraInfo, Image, PointCloud, PointField
-from schemas.sim import Clock, GroundTruth
+from schemas.sim import BoxTruth, Clock, GroundTruth, ObjectTruth, TablePlane
 from schemas.vision import (
     BoundingBox3D,
     Detection3D,
@@ -17,6 +17,7 @@ __all__ = [
     "FLOAT32",
     "UINT32",
     "BoundingBox3D",
+    "BoxTruth",
     "CameraInfo",
     "Clock",
     "Codec",
@@ -27,12 +28,14 @@ __all__ = [
     "Image",
     "Message",
     "ObjectHypothesis",
+    "ObjectTruth",
     "PointCloud",
     "PointField",
     "Pose",
     "Quaternion",
     "SupportPlane",
     "TFMessage",
+    "TablePlane",
     "Transform",
     "TransformStamped",
     "Vector3",

@@ -17,7 +17,8 @@ import numpy.typing as npt
 from mujoco.rendering.classic.gl_context import GLContext
 
 from onebox.errors import SceneError
-from onebox.world.scene import MAX_RANGE_M, MIN_RANGE_M, CameraSpec
+from onebox.world.scene import MAX_RANGE_M, CameraSpec
+from onebox.world.spec import MIN_RANGE_M
 
 
 @dataclass

@@ -1,4 +1,9 @@
-"""The simulated world: scene/one_box.xml with the settings applied, and what it implies.
+"""The simulated world: a scene description compiled into MuJoCo, and what it implies.
+
+The look (lights, the table's grid, materials, the cameras' bodies) comes from
+scene/one_box.xml; the camera's pose, the table, the boxes, the objects and the stand come from
+the scene description (onebox.world.spec: a scene/*.toml file, a random scene, or the seed's
+world from the settings).
 
 Everything a capture's metadata says (the lens, the transforms, the ground truth) is read back
 from the compiled MuJoCo model here, so the published numbers and the rendered pictures come
@@ -17,15 +22,41 @@ import numpy.typing as npt
 
 from onebox.errors import SceneError
 from onebox.settings import SCENE_DIR
-from schemas import CameraInfo, Header, Pose, Quaternion, Transform, TransformStamped, Vector3
+from onebox.world.spec import (
+    ARM_RADIUS_M,
+    MIN_RANGE_M,
+    POST_RADIUS_M,
+    BoxDesc,
+    CameraDesc,
+    SceneDesc,
+    TableDesc,
+    check,
+    in_picture,
+    link_quat,
+    place,
+    stand,
+)
+from schemas import (
+    BoxTruth,
+    CameraInfo,
+    GroundTruth,
+    Header,
+    ObjectTruth,
+    Pose,
+    Quaternion,
+    TablePlane,
+    Transform,
+    TransformStamped,
+    Vector3,
+)
 
 SCENE_FILE = SCENE_DIR / "one_box.xml"
 WORLD_FRAME = "world"
 LINK_FRAME = "camera_link"
 OPTICAL_FRAME = "camera_optical_frame"
 BASIC_WIDTH, BASIC_HEIGHT = 80, 60
-MIN_RANGE_M, MAX_RANGE_M = 0.05, 3.0
-"""The depth camera's range (the seed's <clip>): outside it a pixel reads NaN."""
+MAX_RANGE_M = 3.0
+"""The depth camera's range (the seed's <clip>, from MIN_RANGE_M): outside it a pixel reads NaN."""
 
 # A MuJoCo camera looks along its own -Z with +Y up: the optical frame turned half a turn
 # about X. As a matrix this is its own inverse.
@@ -34,7 +65,8 @@ MUJOCO_TO_OPTICAL = np.diag([1.0, -1.0, -1.0])
 
 @dataclass(frozen=True)
 class SceneSettings:
-    """The scene's settings, with the seed's defaults."""
+    """The seed scene's settings, with the seed's defaults: one box on a table at z = 0 under a
+    camera looking straight down. A scene file (:class:`SceneDesc`) describes any other world."""
 
     width: int = 320
     height: int = 240
@@ -46,6 +78,49 @@ class SceneSettings:
     box_size: float = 0.06
     box_yaw_deg: float = 0.0
     scene_file: Path = SCENE_FILE
+
+
+SEED_RED = (0.85, 0.05, 0.05, 1.0)
+
+
+def seed_scene(settings: SceneSettings = SceneSettings()) -> SceneDesc:
+    """The seed's world as a scene description (scene/one_box.toml says the same)."""
+    if settings.box_size <= 0:
+        raise SceneError(f"box_size {settings.box_size} m: must be positive")
+    if settings.mount_height <= MIN_RANGE_M:
+        raise SceneError(
+            f"mount_height {settings.mount_height} m: the camera must be above the table, "
+            f"more than {MIN_RANGE_M} m up"
+        )
+    boxes = (
+        (
+            BoxDesc(
+                x=settings.box_x,
+                y=settings.box_y,
+                size=(settings.box_size,) * 3,
+                yaw_deg=settings.box_yaw_deg,
+                rgba=SEED_RED,
+                edges=False,
+            ),
+        )
+        if settings.box
+        else ()
+    )
+    return SceneDesc(
+        camera=CameraDesc(
+            z=settings.mount_height,
+            width=settings.width,
+            height=settings.height,
+            hfov_deg=settings.hfov_deg,
+        ),
+        table=TableDesc(z=0.0, size=(2.0, 2.0)),
+        boxes=boxes,
+        description="the seed's world: a red 6 cm box on a table, the camera 0.40 m above it",
+    )
+
+
+def _scene(scene: SceneDesc | SceneSettings) -> SceneDesc:
+    return seed_scene(scene) if isinstance(scene, SceneSettings) else scene
 
 
 @dataclass(frozen=True)
@@ -68,51 +143,120 @@ class CameraSpec:
         return math.degrees(2 * math.atan(self.height / 2 / self.focal_px))
 
 
-def cameras(settings: SceneSettings) -> list[CameraSpec]:
-    """The main camera at the settings' size and the 80 x 60 basic camera, same lens angle."""
+def cameras(scene: SceneDesc | SceneSettings) -> list[CameraSpec]:
+    """The main camera at the scene's size and the 80 x 60 basic camera, same lens angle."""
+    cam = _scene(scene).camera
     return [
-        CameraSpec("camera", settings.width, settings.height, settings.hfov_deg),
-        CameraSpec("basic_camera", BASIC_WIDTH, BASIC_HEIGHT, settings.hfov_deg),
+        CameraSpec("camera", cam.width, cam.height, cam.hfov_deg),
+        CameraSpec("basic_camera", BASIC_WIDTH, BASIC_HEIGHT, cam.hfov_deg),
     ]
 
 
-def _check(settings: SceneSettings) -> None:
-    if settings.width < 1 or settings.height < 1:
-        raise SceneError(f"width x height {settings.width} x {settings.height}: both must be >= 1")
-    if not 1.0 <= settings.hfov_deg <= 170.0:
-        raise SceneError(f"hfov_deg {settings.hfov_deg}: use an angle from 1 to 170 degrees")
-    if settings.mount_height <= MIN_RANGE_M:
-        raise SceneError(
-            f"mount_height {settings.mount_height} m: the camera must be above the table, "
-            f"more than {MIN_RANGE_M} m up"
-        )
-    if settings.box_size <= 0:
-        raise SceneError(f"box_size {settings.box_size} m: must be positive")
+def box_name(index: int) -> str:
+    """The MuJoCo body and geom of box[index]; the first keeps the seed's name, "box"."""
+    return "box" if index == 0 else f"box_{index}"
 
 
-def build_model(settings: SceneSettings) -> mujoco.MjModel:
-    """Compile the scene with the settings applied."""
-    _check(settings)
+def object_name(index: int) -> str:
+    return f"object_{index}"
+
+
+def _rounded(rgba: tuple[float, ...]) -> list[float]:
+    return [float(v) for v in rgba]
+
+
+def build_model(scene: SceneDesc | SceneSettings, base: Path = SCENE_FILE) -> mujoco.MjModel:
+    """Compile the scene: the look of ``base`` (lights, table, materials, cameras) with the
+    scene's camera pose, table, boxes, objects and a stand drawn from the camera's pose."""
+    if isinstance(scene, SceneSettings):
+        base = scene.scene_file
+    desc = _scene(scene)
+    check(desc)
     try:
-        spec = mujoco.MjSpec.from_file(str(settings.scene_file))
+        spec = mujoco.MjSpec.from_file(str(base))
     except (ValueError, FileNotFoundError) as e:
-        raise SceneError(f"cannot load scene {settings.scene_file}: {e}") from e
-    spec.body(LINK_FRAME).pos[2] = settings.mount_height
-    if settings.box:
-        half = settings.box_size / 2
-        body = spec.body("box")
-        body.pos = [settings.box_x, settings.box_y, half]
-        yaw = math.radians(settings.box_yaw_deg)
-        body.quat = [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]
-        spec.geom("box").size = [half, half, half]
-    else:
-        spec.delete(spec.body("box"))
-    specs = cameras(settings)
-    for cam in specs:
-        spec.camera(cam.name).fovy = cam.fovy_deg
+        raise SceneError(f"cannot load scene {base}: {e}") from e
+    for name in ("stand_post", "stand_arm"):
+        spec.delete(spec.geom(name))
+    spec.delete(spec.body("box"))
+
+    cam = desc.camera
+    link = spec.body(LINK_FRAME)
+    link.pos = [cam.x, cam.y, cam.z]
+    link.quat = list(link_quat(cam))
+
+    table = spec.geom("table")
+    table.pos = [0.0, 0.0, desc.table.z]
+    table.size = [desc.table.size[0] / 2, desc.table.size[1] / 2, 0.01]
+
+    # Cartons show their seams: a cube texture, white with darker lines along every face's
+    # edges, tinted by each box's colour. A box with edges = false is plain (the seed's).
+    spec.add_texture(
+        name="carton_edges",
+        type=mujoco.mjtTexture.mjTEXTURE_CUBE,
+        builtin=mujoco.mjtBuiltin.mjBUILTIN_FLAT,
+        mark=mujoco.mjtMark.mjMARK_EDGE,
+        width=48,
+        height=48,
+        rgb1=[1.0, 1.0, 1.0],
+        markrgb=[0.55, 0.55, 0.55],
+    )
+    for i, (box, placed) in enumerate(zip(desc.boxes, place(desc), strict=True)):
+        material = spec.add_material(
+            name=f"{box_name(i)}_material",
+            rgba=_rounded(box.rgba),
+            specular=0.1,
+            shininess=0.2,
+        )
+        if box.edges:
+            material.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "carton_edges"
+        body = spec.worldbody.add_body(
+            name=box_name(i), pos=list(placed.centre), quat=list(placed.quat_wxyz)
+        )
+        body.add_geom(
+            name=box_name(i),
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            size=[s / 2 for s in placed.size],
+            material=material.name,
+        )
+    for i, obj in enumerate(desc.objects):
+        kind = {
+            "cylinder": mujoco.mjtGeom.mjGEOM_CYLINDER,
+            "sphere": mujoco.mjtGeom.mjGEOM_SPHERE,
+            "capsule": mujoco.mjtGeom.mjGEOM_CAPSULE,
+        }[obj.shape]
+        spec.worldbody.add_geom(
+            name=object_name(i),
+            type=kind,
+            pos=[obj.x, obj.y, desc.table.z + obj.height / 2],
+            size=[*obj.size, 0.0, 0.0][:3],
+            rgba=_rounded(obj.rgba),
+        )
+    held = stand(cam, desc.table.z)
+    for name, (start, end), radius in (
+        ("stand_post", held.post, POST_RADIUS_M),
+        ("stand_arm", held.arm, ARM_RADIUS_M),
+        ("stand_drop", held.drop, ARM_RADIUS_M),
+    ):
+        spec.worldbody.add_geom(
+            name=name,
+            type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+            fromto=[*start, *end],
+            size=[radius, 0.0, 0.0],
+            material="stand",
+            contype=0,
+            conaffinity=0,
+        )
+
+    specs = cameras(desc)
+    for c in specs:
+        spec.camera(c.name).fovy = c.fovy_deg
     spec.visual.global_.offwidth = max(c.width for c in specs)
     spec.visual.global_.offheight = max(c.height for c in specs)
-    return spec.compile()
+    try:
+        return spec.compile()
+    except ValueError as e:
+        raise SceneError(f"MuJoCo cannot build the scene: {e}") from e
 
 
 def camera_info(cam: CameraSpec, stamp_ns: int = 0) -> CameraInfo:
@@ -168,7 +312,7 @@ def optical_pose(model: mujoco.MjModel, data: mujoco.MjData, camera: str) -> Pos
 
 
 def box_pose(model: mujoco.MjModel, data: mujoco.MjData) -> tuple[Pose, Vector3] | None:
-    """The box's middle and edges from MuJoCo, or None when the scene has no box."""
+    """The first box's middle and edges from MuJoCo, or None when the scene has no box."""
     geom_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "box")
     if geom_id < 0:
         return None
@@ -176,3 +320,54 @@ def box_pose(model: mujoco.MjModel, data: mujoco.MjData) -> tuple[Pose, Vector3]
     mujoco.mju_mat2Quat(quat_wxyz, data.geom_xmat[geom_id])
     pose = Pose(position=_vector(data.geom_xpos[geom_id]), orientation=_quat_xyzw(quat_wxyz))
     return pose, _vector(2 * model.geom_size[geom_id])
+
+
+def _geom_pose(model: mujoco.MjModel, data: mujoco.MjData, name: str) -> tuple[Pose, int]:
+    geom_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, name)
+    quat_wxyz = np.empty(4)
+    mujoco.mju_mat2Quat(quat_wxyz, data.geom_xmat[geom_id])
+    return Pose(position=_vector(data.geom_xpos[geom_id]), orientation=_quat_xyzw(quat_wxyz)), (
+        geom_id
+    )
+
+
+def ground_truth(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    scene: SceneDesc,
+    top_pixels: list[int],
+    stamp_ns: int = 0,
+) -> GroundTruth:
+    """Everything true of the world at ``stamp_ns``, poses read back from MuJoCo.
+
+    ``top_pixels`` are the counts of :func:`visible_top_pixels` on the main camera's
+    noise-free depth picture."""
+    placed = place(scene)
+    boxes = []
+    for i, (box, p) in enumerate(zip(scene.boxes, placed, strict=True)):
+        pose, geom_id = _geom_pose(model, data, box_name(i))
+        boxes.append(
+            BoxTruth(
+                pose=pose,
+                size=_vector(2 * model.geom_size[geom_id]),
+                on=box.on,
+                top_in_view=in_picture(scene.camera, p.top_corners()),
+                top_pixels=top_pixels[i],
+            )
+        )
+    objects = []
+    for i, obj in enumerate(scene.objects):
+        pose, _ = _geom_pose(model, data, object_name(i))
+        objects.append(ObjectTruth(shape=obj.shape, pose=pose, size=list(obj.size)))
+    first = box_pose(model, data)
+    return GroundTruth(
+        header=Header(stamp_ns=stamp_ns, frame_id=WORLD_FRAME),
+        box_pose=first[0] if first else None,
+        box_size=first[1] if first else None,
+        camera_pose=optical_pose(model, data, "camera"),
+        boxes=boxes,
+        objects=objects,
+        table=TablePlane(
+            offset_m=-scene.table.z, size_x_m=scene.table.size[0], size_y_m=scene.table.size[1]
+        ),
+    )
