@@ -10,10 +10,19 @@ One :class:`SceneLog` turns each message into Rerun archetypes on one recording,
 - ``world/camera``: the camera at its pose (``camera/pose``, world -> camera_optical_frame, or,
   until a pose arrives, the chain on ``tf_static`` to the pictures' frame);
   ``world/camera/image`` the pinhole (``camera/camera_info``), with ``.../rgb`` the colour
-  picture and ``.../depth`` the depth picture under it; ``world/camera/points`` the point cloud
-  (camera_optical_frame, so it sits under the camera's pose);
-- ``world/detections``: each detected box as a see-through 3D box labelled with its class, score
-  and size; ``world/ground_truth`` the simulator's true box, as a thin green wireframe.
+  picture (JPEG) and ``.../depth`` the depth picture under it, which Rerun back-projects into
+  the 3D view; ``world/camera/points`` the point cloud, thinned, only when asked for;
+- ``world/detections``: each detected box as an oriented see-through box labelled with its id,
+  size in millimetres and yaw; ``world/support`` the plane the boxes stand on, a translucent
+  patch; ``world/ground_truth`` the simulator's true boxes, as thin green wireframes.
+
+What never changes (the table, tf_static's frames, the lens) is logged static, so a viewer that
+joins late, or one that has dropped old data to stay within its memory, still has it.
+
+Every message is checked before anything is logged (:class:`BadMessage`): a stamp outside
+0..2^63 ns, a number that is not finite, a zero quaternion, a tf_static that would make a cycle,
+give the world frame a parent or a chain deeper than :data:`MAX_CHAIN` frames, a picture or cloud
+whose sizes do not fit its bytes. The caller reports it with its key and goes on.
 
 :func:`blueprint` is the seed's ``config/one_box.rviz``: the 3D view beside colour and depth.
 """
@@ -21,7 +30,10 @@ One :class:`SceneLog` turns each message into Rerun archetypes on one recording,
 from __future__ import annotations
 
 import logging
+import math
+from typing import Any
 
+import msgspec
 import numpy as np
 import numpy.typing as npt
 import rerun as rr
@@ -30,17 +42,20 @@ from scipy.spatial.transform import Rotation
 
 from onebox import pictures
 from schemas import (
+    FLOAT32,
+    UINT32,
     CameraInfo,
     Detection3DArray,
     GroundTruth,
     Image,
     Message,
-    ObjectHypothesis,
     PointCloud,
+    SupportPlane,
     TFMessage,
     TransformStamped,
 )
-from schemas.geometry import Quaternion
+from schemas.base import Header
+from schemas.geometry import Pose, Quaternion, Vector3
 
 log = logging.getLogger("rerun_log")
 
@@ -48,7 +63,21 @@ TIMELINE = "sim_time"
 WORLD = "world"
 DETECTIONS = f"{WORLD}/detections"
 GROUND_TRUTH = f"{WORLD}/ground_truth"
+SUPPORT = f"{WORLD}/support"
 TABLE = f"{WORLD}/table"
+WORLD_FRAME = "world"
+"""The root of tf_static's tree: a transform that gives it a parent is refused."""
+MAX_CHAIN = 64
+"""The deepest chain of frames drawn; a deeper tf_static is refused (and cannot recurse)."""
+MAX_STAMP_NS = 2**63 - 1
+"""Rerun's timeline holds signed 64-bit nanoseconds."""
+SUPPORT_COLOUR = (255, 200, 0, 70)
+SUPPORT_HALF_M = 0.25
+JPEG_QUALITY = 85
+POINTS_STRIDE = 4
+"""When the cloud is drawn, every 4th point of it: a 320 x 240 cloud becomes 19 200 points."""
+POINTS_INTERVAL_NS = 1_000_000_000
+"""...and at most once a simulated second."""
 
 BOX_COLOUR = (0, 120, 255)
 TRUTH_COLOUR = (0, 200, 80)
@@ -75,9 +104,8 @@ def blueprint(camera: str = "camera") -> rrb.Blueprint:
             rrb.Spatial3DView(
                 name="3D",
                 origin=WORLD,
-                # The depth picture would also be drawn in 3D as a second cloud under the
-                # pinhole; camera/points already shows it, in colour.
-                contents=["$origin/**", f"- {cam}/image/depth"],
+                # The depth picture under the pinhole is back-projected into 3D by Rerun.
+                contents=["$origin/**"],
                 eye_controls=rrb.EyeControls3D(
                     position=[0.36, -0.5, 0.42], look_target=[0.0, 0.02, 0.13], eye_up=[0, 0, 1]
                 ),
@@ -93,14 +121,73 @@ def blueprint(camera: str = "camera") -> rrb.Blueprint:
     )
 
 
-def _quat(q: Quaternion) -> rr.Quaternion:
-    return rr.Quaternion(xyzw=[q.x, q.y, q.z, q.w])
+def table_z_setting(text: str) -> float | None:
+    """The table_z setting: a height in metres, or ``auto`` (the locator finds the surface;
+    the table is drawn at 0 and the found plane on ``support``)."""
+    if str(text).strip().lower() in {"auto", "none", ""}:
+        return None
+    return float(text)
 
 
-def box_label(class_id: str, score: float, size_m: tuple[float, float, float]) -> str:
-    """``box 0.99: 0.060 x 0.060 x 0.060 m``."""
-    sx, sy, sz = size_m
-    return f"{class_id or 'object'} {score:.2f}: {sx:.3f} x {sy:.3f} x {sz:.3f} m"
+def yaw_deg(q: Quaternion) -> float:
+    """The turn of a quaternion about the world's up (z), degrees."""
+    return math.degrees(math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z)))
+
+
+def box_label(name: str, size_m: tuple[float, float, float], yaw: float) -> str:
+    """``box0: 60 x 40 x 30 mm, yaw +30°``."""
+    sx, sy, sz = (round(v * 1000) for v in size_m)
+    return f"{name}: {sx} x {sy} x {sz} mm, yaw {yaw:+.0f}°"
+
+
+class BadMessage(ValueError):
+    """A message the viewer will not draw; the text says what is wrong with it."""
+
+
+def check_stamp(stamp_ns: int) -> None:
+    if not 0 <= stamp_ns <= MAX_STAMP_NS:
+        raise BadMessage(f"stamp {stamp_ns} ns is outside 0 to 2^63 ns")
+
+
+def check_numbers(value: Any, where: str = "") -> None:
+    """Every float finite and every header stamp in range, through nested structs and lists.
+
+    Bytes (pixels, points) are not looked into: the pictures module checks their sizes.
+    """
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            raise BadMessage(f"{where or 'a number'} is {value}")
+    elif isinstance(value, msgspec.Struct):
+        if isinstance(value, Header):
+            check_stamp(value.stamp_ns)
+        for name in value.__struct_fields__:
+            check_numbers(getattr(value, name), f"{where}.{name}" if where else name)
+    elif isinstance(value, list):
+        for i, item in enumerate(value):
+            check_numbers(item, f"{where}[{i}]")
+
+
+def unit_quaternion(q: Quaternion) -> rr.Quaternion:
+    """``q`` normalised; a zero (or not finite) quaternion is no turn at all: refused."""
+    norm = math.sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w)
+    if not math.isfinite(norm) or norm < 1e-6:
+        raise BadMessage(f"quaternion ({q.x}, {q.y}, {q.z}, {q.w}) has no direction")
+    return rr.Quaternion(xyzw=[q.x / norm, q.y / norm, q.z / norm, q.w / norm])
+
+
+def check_cloud(message: PointCloud) -> None:
+    """Each field inside one point, and the data long enough for every point."""
+    sizes = {FLOAT32: 4, UINT32: 4}
+    for f in message.fields:
+        size = sizes.get(f.datatype, 8) * max(f.count, 1)
+        if f.offset < 0 or f.offset + size > message.point_step:
+            raise pictures.ImageError(
+                f"field {f.name} at byte {f.offset} does not fit a point of "
+                f"{message.point_step} bytes",
+                "fields",
+            )
+    if message.width < 0 or message.height < 0:
+        raise pictures.ImageError("a cloud of negative size", "size")
 
 
 def grid_lines(half_m: float, z_m: float, spacing_m: float) -> npt.NDArray[np.float32]:
@@ -144,26 +231,34 @@ def pinhole_matrix(k: list[float]) -> npt.NDArray[np.float64]:
 
 
 class SceneLog:
-    """Logs onebox messages to one Rerun recording; the key decides what a message becomes."""
+    """Logs onebox messages to one Rerun recording; the key decides what a message becomes.
+
+    ``points``: draw camera/points too (thinned to every :data:`POINTS_STRIDE` th point, at
+    most once per :data:`POINTS_INTERVAL_NS`); off by default, as the depth picture under the
+    pinhole already shows the same points.
+    """
 
     def __init__(
         self,
         recording: rr.RecordingStream,
         *,
         camera: str = "camera",
-        table_z_m: float = 0.0,
+        table_z_m: float | None = 0.0,
         table_size_m: float = 1.0,
+        points: bool = False,
     ) -> None:
         self.rec = recording
         self.camera = camera
         self._cam = camera_entity(camera)
-        self._table_z_m = table_z_m
+        self._table_z_m = 0.0 if table_z_m is None else table_z_m
         self._table_size_m = table_size_m
-        self._last_info: CameraInfo | None = None
+        self._points = points
+        self._last_points_ns: int | None = None
+        self._last_info: tuple[tuple[float, ...], int, int] | None = None
         self._static: dict[str, TransformStamped] = {}
         """tf_static's transforms by child frame."""
         self._have_pose = False
-        self._tf_pose_stamp_ns: int | None = None
+        self._tf_pose_frame: str | None = None
 
     def start(self) -> None:
         """The static parts: the world's axes and the table."""
@@ -195,86 +290,121 @@ class SceneLog:
         """Log one message that arrived on ``name`` (the key without namespace).
 
         Returns what it became (``colour``, ``depth``, ``info``, ``pose``, ``points``,
-        ``tf_static``, ``detections``, ``ground_truth``), or None for a key the viewer does not
-        draw. Raises pictures.ImageError for a picture or cloud whose numbers do not agree.
+        ``tf_static``, ``detections``, ``support``, ``ground_truth``), or None for a key the
+        viewer does not draw. Raises BadMessage or pictures.ImageError (both ValueError) for a
+        message it will not draw; nothing of that message is logged then.
         """
-        prefix = f"{self.camera}/"
+        check_numbers(message)
         if isinstance(message, TFMessage):
             self._tf_static(message)
             return "tf_static"
         if isinstance(message, Detection3DArray):
             self._detections(message)
             return "detections"
+        if isinstance(message, SupportPlane):
+            self._support(message)
+            return "support"
         if isinstance(message, GroundTruth):
             self._ground_truth(message)
             return "ground_truth"
+        prefix = f"{self.camera}/"
         if not name.startswith(prefix):
             return None
         rest = name.removeprefix(prefix)
-        if isinstance(message, (Image, CameraInfo)):
-            self._pose_from_tf(message.header.stamp_ns, message.header.frame_id)
         if isinstance(message, Image) and rest == "image_raw":
+            rgb = pictures.rgb(message)
+            self._pose_from_tf(message.header.frame_id)
             self._time(message.header.stamp_ns)
-            self.rec.log(f"{self._cam}/image/rgb", rr.Image(pictures.rgb(message)))
+            self.rec.log(
+                f"{self._cam}/image/rgb",
+                rr.Image(rgb, color_model="RGB").compress(jpeg_quality=JPEG_QUALITY),
+            )
             return "colour"
         if isinstance(message, Image) and rest == "depth/image_raw":
-            self._time(message.header.stamp_ns)
-            depth = pictures.depth_m(message)
-            valid = depth[np.isfinite(depth)]
-            # Colour the readings this picture has, not 0 to the camera's 3 m range.
-            near_far = (float(valid.min()), float(valid.max())) if valid.size else (0.0, 3.0)
-            # Rerun reads 0 as "no reading"; onebox's depth pictures use NaN.
-            self.rec.log(
-                f"{self._cam}/image/depth",
-                rr.DepthImage(
-                    np.nan_to_num(depth, nan=0.0),
-                    meter=1.0,
-                    colormap="viridis",
-                    depth_range=near_far,
-                ),
-            )
+            self._depth(message)
             return "depth"
         if isinstance(message, CameraInfo) and rest == "camera_info":
             self._camera_info(message)
             return "info"
         if isinstance(message, TransformStamped) and rest == "pose":
+            t = message.transform
+            rotation = unit_quaternion(t.rotation)
             self._have_pose = True
             self._time(message.header.stamp_ns)
-            t = message.transform
             self.rec.log(
                 self._cam,
                 rr.Transform3D(
                     translation=[t.translation.x, t.translation.y, t.translation.z],
-                    quaternion=_quat(t.rotation),
+                    quaternion=rotation,
                 ),
                 rr.TransformAxes3D(AXIS_LENGTH_M),
             )
             return "pose"
         if isinstance(message, PointCloud) and rest == "points":
-            self._time(message.header.stamp_ns)
-            points = pictures.cloud(message)
+            check_cloud(message)
+            cloud = pictures.cloud(message)
+            stamp_ns = message.header.stamp_ns
+            if not self._points or (
+                self._last_points_ns is not None
+                and 0 <= stamp_ns - self._last_points_ns < POINTS_INTERVAL_NS
+            ):
+                return "points"
+            self._last_points_ns = stamp_ns
+            self._time(stamp_ns)
             self.rec.log(
                 f"{self._cam}/points",
-                rr.Points3D(points.xyz, colors=points.rgb, radii=POINT_RADIUS_M),
+                rr.Points3D(
+                    cloud.xyz[::POINTS_STRIDE],
+                    colors=cloud.rgb[::POINTS_STRIDE],
+                    radii=POINT_RADIUS_M * 2,
+                ),
             )
             return "points"
         return None
 
     def _time(self, stamp_ns: int) -> None:
+        check_stamp(stamp_ns)
         self.rec.set_time(TIMELINE, duration=np.timedelta64(stamp_ns, "ns"))
+
+    def _depth(self, message: Image) -> None:
+        depth = pictures.depth_m(message)
+        with np.errstate(invalid="ignore"):
+            valid = depth[np.isfinite(depth) & (depth > 0)]
+        # Colour the readings this picture has, near bright and far dark, as `onebox pixels`
+        # draws them: the range is given far to near.
+        near_far = (float(valid.min()), float(valid.max())) if valid.size else (0.05, 3.0)
+        if near_far[1] - near_far[0] < 1e-3:
+            near_far = (near_far[0] - 0.01, near_far[1] + 0.01)
+        # Millimetres in 16 bits: half the bytes of float metres, and 0 is "no reading" both
+        # for Rerun and for a 16UC1 picture.
+        with np.errstate(invalid="ignore"):
+            mm = np.where(np.isfinite(depth) & (depth > 0), depth * 1000.0 + 0.5, 0.0)
+        self._pose_from_tf(message.header.frame_id)
+        self._time(message.header.stamp_ns)
+        self.rec.log(
+            f"{self._cam}/image/depth",
+            rr.DepthImage(
+                np.clip(mm, 0, 65535).astype(np.uint16),
+                meter=1000.0,
+                colormap="turbo",
+                depth_range=(near_far[1] * 1000.0, near_far[0] * 1000.0),
+                point_fill_ratio=0.5,
+            ),
+        )
 
     def _camera_info(self, info: CameraInfo) -> None:
         if len(info.k) != 9:
             raise pictures.ImageError(f"camera info k has {len(info.k)} numbers, not 9", "lens")
+        if not 0 < info.width <= 65535 or not 0 < info.height <= 65535:
+            raise pictures.ImageError(f"camera info of {info.width} x {info.height}", "lens")
+        if info.k[0] <= 0 or info.k[4] <= 0:
+            raise BadMessage(f"camera info focal lengths {info.k[0]}, {info.k[4]}")
+        lens = (tuple(info.k), info.width, info.height)
         # The lens rarely changes: log it again only when it does, not five times a second.
-        if info == self._last_info or (
-            self._last_info is not None
-            and info.k == self._last_info.k
-            and (info.width, info.height) == (self._last_info.width, self._last_info.height)
-        ):
+        if lens == self._last_info:
             return
-        self._last_info = info
-        self._time(info.header.stamp_ns)
+        self._last_info = lens
+        # Static: a late viewer, or one that dropped old data, must still have the lens.
         self.rec.log(
             f"{self._cam}/image",
             rr.Pinhole(
@@ -283,65 +413,96 @@ class SceneLog:
                 camera_xyz=rr.ViewCoordinates.RDF,
                 image_plane_distance=IMAGE_PLANE_M,
             ),
+            static=True,
         )
 
-    def _pose_from_tf(self, stamp_ns: int, frame_id: str) -> None:
+    def _pose_from_tf(self, frame_id: str) -> None:
         """Place the camera by tf_static's chain to ``frame_id`` when no pose has come.
 
         A recording without ``camera/pose`` (the committed capture) still shows the camera where
-        the transforms say, as the locator's tf_static fallback does.
+        the transforms say, as the locator's tf_static fallback does. Static, as the chain is.
         """
-        if self._have_pose or stamp_ns == self._tf_pose_stamp_ns:
+        if self._have_pose or frame_id == self._tf_pose_frame:
             return
         chain = world_from_frame(self._static, frame_id)
         if chain is None:
             return
         translation, rotation = chain
-        self._tf_pose_stamp_ns = stamp_ns
-        self._time(stamp_ns)
+        self._tf_pose_frame = frame_id
         self.rec.log(
             self._cam,
             rr.Transform3D(
                 translation=translation, quaternion=rr.Quaternion(xyzw=rotation.as_quat())
             ),
             rr.TransformAxes3D(AXIS_LENGTH_M),
+            static=True,
         )
 
     def _tf_static(self, message: TFMessage) -> None:
-        self._static.update({t.child_frame_id: t for t in message.transforms})
-        parent_of = {t.child_frame_id: t.header.frame_id for t in message.transforms}
-
-        def path(frame: str, depth: int = 0) -> str:
-            parent = parent_of.get(frame)
-            if parent is None or depth > len(parent_of):  # a root, or a loop in bad data
-                return WORLD
-            return f"{path(parent, depth + 1)}/{frame}"
-
+        """A newer transform for a child replaces the older; a message that would make a
+        cycle, give the world a parent or a chain deeper than MAX_CHAIN is refused whole."""
+        tree = dict(self._static)
         for t in message.transforms:
+            parent, child = t.header.frame_id, t.child_frame_id
+            if not parent or not child or parent == child:
+                raise BadMessage(f"transform {parent!r} -> {child!r} needs two different frames")
+            if child == WORLD_FRAME:
+                raise BadMessage(f"transform {parent!r} -> {child!r} gives the world a parent")
+            unit_quaternion(t.transform.rotation)
+            tree[child] = t
+        paths: dict[str, str] = {}
+        for child in tree:
+            chain = [child]
+            frame = tree[child].header.frame_id
+            while frame in tree:
+                if frame in chain:
+                    raise BadMessage(f"tf_static makes a cycle through {frame!r}")
+                if len(chain) >= MAX_CHAIN:
+                    raise BadMessage(f"tf_static has a chain deeper than {MAX_CHAIN} frames")
+                chain.append(frame)
+                frame = tree[frame].header.frame_id
+            root = [] if frame == WORLD_FRAME else [frame]
+            paths[child] = "/".join([WORLD, *root, *reversed(chain)])
+        moved = self._static != tree
+        self._static = tree
+        for child, t in tree.items():
             tr = t.transform
             self.rec.log(
-                path(t.child_frame_id),
+                paths[child],
                 rr.Transform3D(
                     translation=[tr.translation.x, tr.translation.y, tr.translation.z],
-                    quaternion=_quat(tr.rotation),
+                    quaternion=unit_quaternion(tr.rotation),
                 ),
                 rr.TransformAxes3D(AXIS_LENGTH_M),
                 static=True,
             )
+        if moved:
+            self._tf_pose_frame = None  # the camera's chain may have changed: place it again
+
+    def _boxes(
+        self, poses: list[tuple[Pose, Vector3]]
+    ) -> tuple[list[list[float]], list[list[float]], list[rr.Quaternion]]:
+        centres, sizes, quats = [], [], []
+        for pose, size in poses:
+            if min(size.x, size.y, size.z) < 0:
+                raise BadMessage(f"a box of size {size.x} x {size.y} x {size.z}")
+            quats.append(unit_quaternion(pose.orientation))
+            centres.append([pose.position.x, pose.position.y, pose.position.z])
+            sizes.append([size.x, size.y, size.z])
+        return centres, sizes, quats
 
     def _detections(self, message: Detection3DArray) -> None:
+        boxes = [(d.bbox.center, d.bbox.size) for d in message.detections]
+        centres, sizes, quats = self._boxes(boxes)
         self._time(message.header.stamp_ns)
         if not message.detections:
             self.rec.log(DETECTIONS, rr.Clear(recursive=True))
             return
-        centres, sizes, quats, labels = [], [], [], []
-        for d in message.detections:
-            c, s = d.bbox.center, d.bbox.size
-            centres.append([c.position.x, c.position.y, c.position.z])
-            sizes.append([s.x, s.y, s.z])
-            quats.append(_quat(c.orientation))
-            best = d.results[0] if d.results else ObjectHypothesis()
-            labels.append(box_label(best.class_id, best.score, (s.x, s.y, s.z)))
+        labels = []
+        for i, d in enumerate(message.detections):
+            s = d.bbox.size
+            name = d.id or (d.results[0].class_id if d.results else "") or f"box {i}"
+            labels.append(box_label(name, (s.x, s.y, s.z), yaw_deg(d.bbox.center.orientation)))
         self.rec.log(
             DETECTIONS,
             rr.Boxes3D(
@@ -356,18 +517,56 @@ class SceneLog:
             ),
         )
 
-    def _ground_truth(self, message: GroundTruth) -> None:
+    def _support(self, message: SupportPlane) -> None:
+        """The plane n . p + offset = 0 as a translucent square around its point nearest the
+        origin of its frame, drawn in that frame (world, or the camera's when no pose)."""
+        n = np.array([message.normal.x, message.normal.y, message.normal.z])
+        norm = float(np.linalg.norm(n))
+        if norm < 1e-6:
+            raise BadMessage("support plane normal has no direction")
+        n = n / norm
+        centre = -message.offset_m / norm * n
+        # Two directions in the plane.
+        helper = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        u = np.cross(n, helper)
+        u /= np.linalg.norm(u)
+        v = np.cross(n, u)
+        h = SUPPORT_HALF_M
+        corners = [centre + h * (a * u + b * v) for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
         self._time(message.header.stamp_ns)
-        if message.box_pose is None or message.box_size is None:
+        tilt = "" if message.tilt_deg is None else f", tilt {message.tilt_deg:.1f}°"
+        entity = SUPPORT if message.header.frame_id in ("", WORLD_FRAME) else f"{self._cam}/support"
+        self.rec.log(
+            entity,
+            rr.Mesh3D(
+                vertex_positions=np.asarray(corners, np.float32),
+                triangle_indices=[[0, 1, 2], [0, 2, 3]],
+                albedo_factor=SUPPORT_COLOUR,
+            ),
+            rr.AnyValues(label=f"support {message.inlier_share:.0%} inliers{tilt}"),
+        )
+
+    def _ground_truth(self, message: GroundTruth) -> None:
+        truth: list[tuple[Pose, Vector3]] = []
+        # A newer sim lists every box; an older one has box_pose and box_size only.
+        for item in getattr(message, "boxes", None) or []:
+            pose = getattr(item, "pose", None) or getattr(item, "center", None)
+            size = getattr(item, "size", None)
+            if isinstance(pose, Pose) and isinstance(size, Vector3):
+                truth.append((pose, size))
+        if not truth and message.box_pose is not None and message.box_size is not None:
+            truth.append((message.box_pose, message.box_size))
+        centres, sizes, quats = self._boxes(truth)
+        self._time(message.header.stamp_ns)
+        if not truth:
             self.rec.log(GROUND_TRUTH, rr.Clear(recursive=True))
             return
-        p, s = message.box_pose, message.box_size
         self.rec.log(
             GROUND_TRUTH,
             rr.Boxes3D(
-                centers=[[p.position.x, p.position.y, p.position.z]],
-                sizes=[[s.x, s.y, s.z]],
-                quaternions=[_quat(p.orientation)],
+                centers=centres,
+                sizes=sizes,
+                quaternions=quats,
                 colors=[TRUTH_COLOUR],
                 radii=rr.Radius.ui_points(0.75),
             ),

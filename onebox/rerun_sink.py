@@ -1,7 +1,14 @@
 """Where a Rerun recording goes: a .rrd file, the native viewer, or the loopback web viewer.
 
 The SDK's own ``serve_web_viewer()`` binds every interface; the ``rerun`` executable that
-rerun-sdk ships can bind loopback only, so the web viewer runs as a child process of ours.
+rerun-sdk ships can bind loopback only, so the web viewer runs as a child process of ours. The
+child runs in its own session, so a Ctrl-C or honcho's SIGTERM to our process group reaches us
+first: we flush and disconnect, then stop it, and no "transport error" is printed. A port left
+at 0 means "the usual port (9876, 9090) if free, else any free one", so two pipelines with
+viewers run side by side.
+
+A saved .rrd is written to a hidden file beside it and renamed when complete: a failure leaves
+nothing behind, and an existing file is replaced only when asked to.
 """
 
 from __future__ import annotations
@@ -26,6 +33,8 @@ from onebox.errors import OneboxError
 log = logging.getLogger("viewer")
 
 APPLICATION_ID = "onebox"
+DEFAULT_GRPC_PORT = 9876
+DEFAULT_WEB_PORT = 9090
 
 
 class ViewerError(OneboxError):
@@ -63,6 +72,22 @@ def _port_free(port: int) -> bool:
     return True
 
 
+def choose_port(port: int, usual: int, flag: str) -> int:
+    """``port`` if set (it must be free); for 0, ``usual`` if free, else any free port."""
+    if port:
+        if not _port_free(port):
+            raise ViewerError(
+                f"port {port} on 127.0.0.1 is taken (another viewer?): choose another with "
+                f"{flag}, or 0 for any free port"
+            )
+        return port
+    if _port_free(usual):
+        return usual
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
 def _wait_for_port(port: int, proc: subprocess.Popen[bytes], timeout_s: float) -> None:
     deadline = time.monotonic() + timeout_s
     while True:
@@ -78,11 +103,6 @@ def _wait_for_port(port: int, proc: subprocess.Popen[bytes], timeout_s: float) -
 @contextlib.contextmanager
 def web_server(grpc_port: int, web_port: int, memory_limit: str) -> Iterator[str]:
     """A loopback-only ``rerun --serve-web`` child; yields the gRPC address to log to."""
-    for port, flag in ((grpc_port, "--grpc-port"), (web_port, "--web-port")):
-        if not _port_free(port):
-            raise ViewerError(
-                f"port {port} on 127.0.0.1 is taken (another viewer?): choose another with {flag}"
-            )
     # The SDK's own serve_web_viewer() binds every interface; the CLI can bind loopback only.
     cmd = [
         rerun_executable(),
@@ -96,7 +116,12 @@ def web_server(grpc_port: int, web_port: int, memory_limit: str) -> Iterator[str
         "--server-memory-limit",
         memory_limit,
     ]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        cmd,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
     try:
         _wait_for_port(grpc_port, proc, timeout_s=20.0)
         _wait_for_port(web_port, proc, timeout_s=20.0)
@@ -124,38 +149,59 @@ class Sink:
     web: bool = False
     """Serve the web viewer even when a display is there."""
     camera: str = "camera"
-    grpc_port: int = 9876
-    web_port: int = 9090
-    memory_limit: str = "1GiB"
+    grpc_port: int = 0
+    """0: 9876 if free, else any free port."""
+    web_port: int = 0
+    """0: 9090 if free, else any free port."""
+    memory_limit: str = "256MiB"
+    """What the web server keeps for browsers that join late; static data is always kept."""
+    overwrite: bool = False
+    """Replace an existing --save file."""
+
+
+def _partial(path: Path) -> Path:
+    return path.with_name(f".{path.name}.{os.getpid()}.partial")
 
 
 @contextlib.contextmanager
 def open_recording(sink: Sink) -> Iterator[rr.RecordingStream]:
     """A recording sent where ``sink`` says; a saved file is complete when the block ends."""
+    if sink.save is not None and sink.save.exists() and not sink.overwrite:
+        raise ViewerError(
+            f"{sink.save} already exists: delete it, choose another name, or pass --overwrite"
+        )
     rec = rr.RecordingStream(APPLICATION_ID)
     blueprint = rerun_scene.blueprint(sink.camera)
+    partial = _partial(sink.save) if sink.save is not None else None
     with contextlib.ExitStack() as stack:
-        if sink.save is not None:
-            sink.save.parent.mkdir(parents=True, exist_ok=True)
-            rec.save(sink.save, default_blueprint=blueprint)
+        if partial is not None:
+            partial.parent.mkdir(parents=True, exist_ok=True)
+            rec.save(partial, default_blueprint=blueprint)
             print(f"viewer: writing {sink.save}", flush=True)
         elif has_display() and not sink.web:
-            rec.spawn(port=sink.grpc_port, default_blueprint=blueprint)
+            port = choose_port(sink.grpc_port, DEFAULT_GRPC_PORT, "--grpc-port")
+            rec.spawn(port=port, default_blueprint=blueprint)
             print("viewer: opened the Rerun viewer", flush=True)
         else:
-            url = stack.enter_context(web_server(sink.grpc_port, sink.web_port, sink.memory_limit))
+            grpc_port = choose_port(sink.grpc_port, DEFAULT_GRPC_PORT, "--grpc-port")
+            web_port = choose_port(sink.web_port, DEFAULT_WEB_PORT, "--web-port")
+            url = stack.enter_context(web_server(grpc_port, web_port, sink.memory_limit))
             rec.connect_grpc(url, default_blueprint=blueprint)
-            print(
-                f"viewer: no display; open {web_address(sink.grpc_port, sink.web_port)}",
-                flush=True,
-            )
-        # Leaving `with rec` flushes and finalizes the .rrd (writes its footer).
+            print(f"viewer: no display; open {web_address(grpc_port, web_port)}", flush=True)
         try:
+            # Leaving `with rec` flushes and finalizes the .rrd (writes its footer).
             with rec:
                 yield rec
-        except RuntimeError as e:
-            # honcho stops the whole process group at once, so the web server (our child) may
-            # be gone before the last flush; what was not sent had no one left to see it.
-            if sink.save is not None or "gRPC" not in str(e):
-                raise
-            log.info("the web viewer stopped first; nothing more to send")
+        except BaseException:
+            if partial is not None:
+                rec.disconnect()
+                with contextlib.suppress(FileNotFoundError):
+                    partial.unlink()
+            raise
+        finally:
+            # Send what is left while the web server (our child) is still up, then let go of it.
+            with contextlib.suppress(RuntimeError):
+                rec.flush(timeout_sec=5.0)
+            rec.disconnect()
+    if partial is not None and sink.save is not None:
+        os.replace(partial, sink.save)

@@ -10,7 +10,13 @@ Rerun's ``sim_time`` timeline at its header stamp, so scrubbing the timeline rep
 message that does not decode is reported with its key and skipped. A truncated file (a recorder
 that was killed) is read up to its last complete chunk with --recover.
 
-Showing serves the recording until Ctrl-C; --save writes the file and exits.
+A message the viewer will not draw (a stamp outside 0..2^63 ns, NaN, a zero quaternion, a
+tf_static cycle, a picture whose sizes do not fit its bytes) is reported with its key and left
+out, as in the live viewer.
+
+Showing serves the recording until Ctrl-C; --save writes the file and exits. --save refuses to
+replace an existing file without --overwrite, and leaves nothing behind when it fails (a file
+that is not MCAP, say): the .rrd is written beside it and renamed when complete.
 """
 
 from __future__ import annotations
@@ -26,7 +32,6 @@ import msgspec
 from onebox import recording, rerun_scene, rerun_sink, settings, sync
 from onebox.errors import RecordingError
 from onebox.keys import type_for_key
-from onebox.pictures import ImageError
 from schemas import codec
 
 log = logging.getLogger("view")
@@ -46,10 +51,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--web", action="store_true", help="serve the web viewer even when a display exists"
     )
-    parser.add_argument("--web-port", type=int, default=9090, help="web viewer port (9090)")
-    parser.add_argument("--grpc-port", type=int, default=9876, help="Rerun's data port (9876)")
-    parser.add_argument("--memory-limit", default="1GiB", help="web server's buffer (1GiB)")
-    settings.add(parser, "table_z", 0.0, "height of the table top, metres")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing --save file")
+    settings.add(parser, "web_port", 0, "web viewer port on 127.0.0.1; 0: 9090 or any free")
+    settings.add(parser, "grpc_port", 0, "Rerun's data port on 127.0.0.1; 0: 9876 or any free")
+    settings.add(parser, "memory_limit", "1GiB", "what the web server keeps for browsers")
+    settings.add(
+        parser,
+        "table_z",
+        "auto",
+        "height of the table top, metres; auto draws it at 0 (the found plane is on support)",
+        kind=rerun_scene.table_z_setting,
+    )
     settings.add(parser, "namespace", "", "the prefix the recorded keys carry, if any")
 
 
@@ -70,7 +82,8 @@ def log_file(path: Path, scene: rerun_scene.SceneLog, namespace: str, recover: b
         try:
             message = codec(message_type).decode(item.payload)
             kind = scene.log(name, message)
-        except (msgspec.DecodeError, msgspec.ValidationError, ImageError) as e:
+        except (msgspec.DecodeError, msgspec.ValidationError, ValueError, OverflowError) as e:
+            # ValueError covers the scene's BadMessage and ImageError.
             limiter.warn(item.key, "bad", f"skipped: {e}")
             continue
         if kind is None:
@@ -92,6 +105,7 @@ def main(args: argparse.Namespace) -> int:
         grpc_port=args.grpc_port,
         web_port=args.web_port,
         memory_limit=args.memory_limit,
+        overwrite=args.overwrite,
     )
     if not args.file.exists():
         raise RecordingError(f"{args.file} does not exist: give the path of an .mcap recording")

@@ -1,28 +1,37 @@
 """Show the running system in Rerun, live: the seed's RViz.
 
 Reads (under the namespace), for the camera named by --camera (default ``camera``):
-  CAMERA/image_raw        Image rgb8           the colour picture, 5 Hz
-  CAMERA/depth/image_raw  Image 32FC1          the depth picture, metres, NaN = no reading
-  CAMERA/camera_info      CameraInfo           the lens, drawn as a pinhole
+  CAMERA/image_raw        Image rgb8           the colour picture (sent to Rerun as JPEG), 5 Hz
+  CAMERA/depth/image_raw  Image 32FC1          the depth picture (near bright), back-projected
+                                               into 3D by Rerun under the pinhole
+  CAMERA/camera_info      CameraInfo           the lens, drawn as a pinhole (static)
   CAMERA/pose             TransformStamped     world -> camera_optical_frame, with each capture
-  CAMERA/points           PointCloud           the cloud in colour, in camera_optical_frame
+  CAMERA/points           PointCloud           checked; drawn (thinned, 1 Hz) only with --points
   tf_static               TFMessage            latched: world -> camera_link -> optical frame
-  detections              Detection3DArray     each box as a labelled 3D box with its size
-  sim/ground_truth        GroundTruth          the true box, as a thin green wireframe
+  detections              Detection3DArray     each box oriented, labelled id, size (mm), yaw
+  support                 SupportPlane         the plane the boxes stand on, a translucent patch
+  sim/ground_truth        GroundTruth          the true boxes, as thin green wireframes
 Writes: nothing on the bus. Rerun's time is simulated time (``sim_time``, each header's stamp).
 
 Where it shows them:
   - with a display ($DISPLAY or $WAYLAND_DISPLAY): the native Rerun viewer;
   - without one: a web viewer served on loopback (a ``rerun --serve-web`` child process); the
-    address to open is printed;
-  - --save FILE.rrd: a recording instead, which ``rerun FILE.rrd`` opens later.
+    address to open is printed. Its ports are settings (GRPC_PORT, WEB_PORT); left at 0 they
+    are 9876 and 9090 when free and any free ports otherwise, so a second pipeline's viewer
+    starts beside the first. The server keeps --memory-limit of data for late browsers;
+    what never changes (lens, tf_static, table) is static and always kept;
+  - --save FILE.rrd: a recording instead, which ``rerun FILE.rrd`` opens later (refused if it
+    exists, unless --overwrite; nothing is left behind on failure).
 The layout is the seed's config/one_box.rviz: the 3D view beside the colour and depth pictures.
 
 Settings: viewer (environment VIEWER, config [viewer] viewer; the seed's rviz:=false). With
 ``VIEWER=false`` it logs "viewer off" and idles until stopped, so ``honcho start`` keeps the
-other processes running. --frames N stops after N complete captures (colour, depth, info, points
-and detections of one stamp), --duration-s S after S seconds: for tests and benchmarks.
-A slow viewer keeps the newest message on each key and says how many it dropped.
+other processes running. --frames N stops after N complete captures (colour, depth, info and
+detections of one stamp), --duration-s S after S seconds: for tests and benchmarks.
+A slow viewer keeps the newest message on each key and says how many it dropped. A message it
+will not draw (a stamp outside 0..2^63 ns, NaN, a zero quaternion, a tf_static cycle or a chain
+deeper than 64 frames, a picture or cloud whose sizes do not fit its bytes) is logged with its
+key and dropped; the next valid one is shown.
 """
 
 from __future__ import annotations
@@ -31,10 +40,10 @@ import argparse
 import logging
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
-from onebox import bus, rerun_scene, rerun_sink, settings, sync
-from onebox.pictures import ImageError
+from onebox import bus, keys, rerun_scene, rerun_sink, settings, sync
 from schemas import (
     CameraInfo,
     Detection3DArray,
@@ -42,15 +51,17 @@ from schemas import (
     Image,
     Message,
     PointCloud,
+    SupportPlane,
     TFMessage,
     TransformStamped,
 )
 
 log = logging.getLogger("viewer")
 
-COMPLETE = frozenset({"colour", "depth", "info", "points", "detections"})
+COMPLETE = frozenset({"colour", "depth", "info", "detections"})
 """What one capture must have logged to count towards --frames. Not the pose: a recording
-without one (the committed capture) places the camera by tf_static instead."""
+without one (the committed capture) places the camera by tf_static instead; not the cloud,
+which the depth picture under the pinhole already shows."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -66,21 +77,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="serve the web viewer even when a display exists",
     )
-    parser.add_argument(
-        "--web-port", type=int, default=9090, help="web viewer port on 127.0.0.1 (default 9090)"
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing --save file")
+    settings.add(parser, "web_port", 0, "web viewer port on 127.0.0.1; 0: 9090 or any free")
+    settings.add(parser, "grpc_port", 0, "Rerun's data port on 127.0.0.1; 0: 9876 or any free")
+    settings.add(
+        parser, "memory_limit", "256MiB", "what the web server keeps for late-joining browsers"
     )
     parser.add_argument(
-        "--grpc-port",
-        type=int,
-        default=9876,
-        help="Rerun's data port on 127.0.0.1 (default 9876)",
+        "--points", action="store_true", help="also draw camera/points (thinned, once a second)"
     )
-    parser.add_argument(
-        "--memory-limit",
-        default="1GiB",
-        help="how much the web viewer's server keeps for late-joining browsers (default 1GiB)",
+    settings.add(
+        parser,
+        "table_z",
+        "auto",
+        "height of the table top, metres; auto draws it at 0 (the found plane is on support)",
+        kind=rerun_scene.table_z_setting,
     )
-    settings.add(parser, "table_z", 0.0, "height of the table top, metres")
     parser.add_argument("--frames", type=int, help="stop after this many complete captures")
     parser.add_argument("--duration-s", type=float, help="stop after this many seconds")
     bus.add_arguments(parser)
@@ -128,6 +140,16 @@ KEYS: dict[str, type[Message]] = {
 }
 
 
+@dataclass(frozen=True)
+class ViewerSettings:
+    viewer: bool
+    camera: str
+    table_z_m: float | None
+    points: bool
+    frames: int | None
+    duration_s: float | None
+
+
 def main(args: argparse.Namespace) -> int:
     sink = rerun_sink.Sink(
         save=args.save,
@@ -136,8 +158,17 @@ def main(args: argparse.Namespace) -> int:
         grpc_port=args.grpc_port,
         web_port=args.web_port,
         memory_limit=args.memory_limit,
+        overwrite=args.overwrite,
     )
-    if not args.viewer:
+    s = ViewerSettings(
+        viewer=args.viewer,
+        camera=args.camera,
+        table_z_m=args.table_z,
+        points=args.points,
+        frames=args.frames,
+        duration_s=args.duration_s,
+    )
+    if not s.viewer:
         return idle()
     inbox = LatestPerKey()
     limiter = sync.ReportLimiter(log, interval_s=10.0)
@@ -145,27 +176,30 @@ def main(args: argparse.Namespace) -> int:
     complete = 0
     started = time.monotonic()
     with bus.open_bus(args) as b, rerun_sink.open_recording(sink) as rec:
-        scene = rerun_scene.SceneLog(rec, camera=args.camera, table_z_m=args.table_z)
+        scene = rerun_scene.SceneLog(rec, camera=s.camera, table_z_m=s.table_z_m, points=s.points)
         scene.start()
 
         def on_message(key: str, message: Message) -> None:
             inbox.put(b.unkey(key), message)
 
         for suffix, message_type in KEYS.items():
-            b.subscribe(f"{args.camera}/{suffix}", message_type, on_message)
-        b.subscribe("tf_static", TFMessage, on_message, history=True)
-        b.subscribe("detections", Detection3DArray, on_message)
-        b.subscribe("sim/ground_truth", GroundTruth, on_message)
-        log.info("showing %s/*, tf_static, detections and sim/ground_truth", args.camera)
+            b.subscribe(f"{s.camera}/{suffix}", message_type, on_message)
+        b.subscribe(keys.TF_STATIC, TFMessage, on_message, history=True)
+        b.subscribe(keys.DETECTIONS, Detection3DArray, on_message)
+        b.subscribe(keys.SUPPORT, SupportPlane, on_message)
+        b.subscribe(keys.GROUND_TRUTH, GroundTruth, on_message)
+        log.info("showing %s/*, tf_static, detections, support and sim/ground_truth", s.camera)
         dropped_reported = 0
-        while args.frames is None or complete < args.frames:
-            if args.duration_s is not None and time.monotonic() - started > args.duration_s:
+        while s.frames is None or complete < s.frames:
+            if s.duration_s is not None and time.monotonic() - started > s.duration_s:
                 break
             for name, message in inbox.take(timeout_s=0.5):
                 try:
                     kind = scene.log(name, message)
-                except ImageError as e:
-                    limiter.warn(name, "bad", f"not shown: {e}")
+                except (ValueError, OverflowError) as e:
+                    # BadMessage and ImageError are ValueErrors; whatever else Rerun refuses
+                    # in a message is too. One bad message never stops the viewer.
+                    limiter.warn(name, type(e).__name__, f"not shown: {e}")
                     continue
                 stamp_ns = getattr(getattr(message, "header", None), "stamp_ns", None)
                 if kind is None or stamp_ns is None:
