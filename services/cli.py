@@ -35,6 +35,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "hz": ("services.hz", "how often messages arrive on a key (ros2 topic hz)"),
     "bw": ("services.bw", "how many bytes a second a key carries (ros2 topic bw)"),
     "pub": ("services.pub", "publish a message typed from JSON (ros2 topic pub)"),
+    "certs": ("services.certs", "make a CA and one certificate a process for config/secure/"),
 }
 
 
