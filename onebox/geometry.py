@@ -164,8 +164,8 @@ class FrameTree:
 
     @property
     def frames(self) -> set[str]:
-        """Every frame named so far, and the roots."""
-        return set(self._parent) | {parent for parent, _ in self._parent.values()} | self.roots
+        """Every frame named so far by a transform."""
+        return set(self._parent) | {parent for parent, _ in self._parent.values()}
 
     def _to_root(self, frame: str) -> tuple[str, Float64Array]:
         """The root of ``frame``'s tree and the matrix ``root <- frame``."""
@@ -179,7 +179,7 @@ class FrameTree:
         """The 4 x 4 matrix moving points of ``child`` into ``parent``. Raises FrameError."""
         if parent == child:
             return np.eye(4)
-        known = self.frames
+        known = self.frames | self.roots
         for name in (parent, child):
             if name not in known:
                 listed = ", ".join(sorted(known)) or "none yet"
