@@ -1,173 +1,261 @@
-"""How close the seed's method gets: the locator's detections against sim/ground_truth.
+"""How right the boxes come out: the locator's finder on MuJoCo renders against the ground truth.
 
-    python benchmarks/bench_accuracy.py [--boxes 50] [--seed 1] [--random-yaw]
+    python benchmarks/bench_accuracy.py [--scenes 30] [--empty 50] [--seed 1] [--only NAME]
 
-Starts a private ``onebox router`` and one real ``onebox locator``, then for each of ``--boxes``
-random boxes (edge 3 to 10 cm, anywhere the whole box stays in the 320 x 240 camera's view,
-turned when ``--random-yaw``) runs ``onebox sim --rate-hz 30 --frames 4`` with that box and
-pairs each detection with the sim's ground truth of the same stamp. Prints the median and the
-worst error of the middle (x, y and the distance) and of the height, in millimetres, and the
-default scene's error on its own line.
+Builds each world the way ``onebox sim`` does (random scenes from seeds, scene/pallet.toml,
+scene/clutter.toml, the seed's world), renders colour and depth with MuJoCo, adds the depth
+noise, and runs the box finder the locator runs (``onebox.perception.boxes.BoxFinder``) on the
+picture, the lens the sim publishes and the camera's pose. Each detection is paired with the
+nearest true box; a box whose top the ground truth says is fully in view and that nothing
+detected is "missed", a detection near no true box is "false". A platform (a true box that two
+or more others stand on, such as a pallet) is the surface under them, not a box to find: found
+or not, it counts neither way.
+
+Prints, per case, median / p90 / worst of: the centre's error (mm, and as a share of the
+camera's distance), the yaw's (degrees, modulo the box's symmetry), length and width (mm,
+scaled to a camera 0.4 m away), height (mm); and the counts of found, missed and false boxes.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
-import random
-import statistics
 import sys
-import threading
 import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+
+import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from onebox import bus
-from onebox.testing.processes import Processes, bus_args, free_port
-from schemas import Detection3DArray, GroundTruth, codec
+from onebox.geometry import Intrinsics
+from onebox.perception.boxes import BoxFinder, FinderSettings, Found
+from onebox.world import spec
+from onebox.world.noise import PRESETS, NoiseSpec
+from onebox.world.random_scene import random_scene
+from onebox.world.render import SceneRenderer
+from onebox.world.scene import (
+    build_model,
+    camera_info,
+    cameras,
+    ground_truth,
+    optical_pose,
+    seed_scene,
+)
+from onebox.world.spec import SceneDesc, place, visible_top_pixels
+from schemas import BoxTruth, GroundTruth
 
-HALF_VIEW_X_M = 0.40 * math.tan(math.radians(30)) * (0.40 - 0.10) / 0.40  # at the highest top
-HALF_VIEW_Y_M = HALF_VIEW_X_M * 240 / 320
-MARGIN_M = 0.01
-
-
-class Pairs:
-    """Detections and ground truth of one sim run, paired by stamp."""
-
-    def __init__(self) -> None:
-        self.detections: dict[int, Detection3DArray] = {}
-        self.truths: dict[int, GroundTruth] = {}
-        self.cond = threading.Condition()
-
-    def on_detections(self, key: str, payload: bytes) -> None:
-        array = codec(Detection3DArray).decode(payload)
-        with self.cond:
-            self.detections[array.header.stamp_ns] = array
-            self.cond.notify_all()
-
-    def on_truth(self, key: str, payload: bytes) -> None:
-        truth = codec(GroundTruth).decode(payload)
-        with self.cond:
-            self.truths[truth.header.stamp_ns] = truth
-            self.cond.notify_all()
-
-    def paired(self) -> list[tuple[Detection3DArray, GroundTruth]]:
-        return [(d, self.truths[s]) for s, d in self.detections.items() if s in self.truths]
-
-    def reset(self) -> None:
-        with self.cond:
-            self.detections.clear()
-            self.truths.clear()
-
-    def wait(self, count: int, timeout_s: float) -> bool:
-        with self.cond:
-            return self.cond.wait_for(lambda: len(self.paired()) >= count, timeout=timeout_s)
+SCENES = Path(__file__).resolve().parent.parent / "scene"
 
 
-def random_box(rng: random.Random, yaw: bool) -> tuple[float, float, float, float]:
-    size = rng.uniform(0.03, 0.10)
-    reach = size / 2 * math.sqrt(2) + MARGIN_M  # a turned box reaches out to its corner
-    x = rng.uniform(-HALF_VIEW_X_M + reach, HALF_VIEW_X_M - reach)
-    y = rng.uniform(-HALF_VIEW_Y_M + reach, HALF_VIEW_Y_M - reach)
-    return x, y, size, rng.uniform(0.0, 90.0) if yaw else 0.0
+@dataclass
+class Errors:
+    """One case's errors, one entry a matched box."""
+
+    centre_mm: list[float] = field(default_factory=list)
+    centre_share: list[float] = field(default_factory=list)
+    yaw_deg: list[float] = field(default_factory=list)
+    size_mm_at_04: list[float] = field(default_factory=list)
+    size_mm: list[float] = field(default_factory=list)
+    height_mm: list[float] = field(default_factory=list)
+    found: int = 0
+    missed: int = 0
+    false: int = 0
+    pictures: int = 0
+    ms: list[float] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
 
 
-def errors_mm(array: Detection3DArray, truth: GroundTruth) -> tuple[float, float, float] | None:
-    """(x, y, height) errors of one detection, or None when the box was missed."""
-    if not array.detections or truth.box_pose is None or truth.box_size is None:
-        return None
-    bbox = array.detections[0].bbox
-    middle, true_middle = bbox.center.position, truth.box_pose.position
-    true_height = true_middle.z + truth.box_size.z / 2
+def quat_matrix(x: float, y: float, z: float, w: float) -> np.ndarray:
+    return spec.quat_matrix((w, x, y, z))
+
+
+def yaw_of(rotation: np.ndarray) -> float:
+    """The length axis's angle about world z, degrees."""
+    return math.degrees(math.atan2(rotation[1, 0], rotation[0, 0]))
+
+
+def yaw_error(detected: float, true: float, square: bool) -> float:
+    """The smallest turn between two length axes (a box looks the same turned half a turn, and
+    a square top a quarter)."""
+    period = 90.0 if square else 180.0
+    diff = (detected - true) % period
+    return min(diff, period - diff)
+
+
+def render(
+    scene: SceneDesc, noise: NoiseSpec
+) -> Iterator[tuple[np.ndarray, np.ndarray, Intrinsics, np.ndarray, GroundTruth]]:
+    """Depth (noisy), colour, lens, camera pose and ground truth of the main camera."""
+    import mujoco  # after onebox, which makes MuJoCo render headless
+
+    from onebox.world.noise import DepthNoise
+
+    model = build_model(scene)
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    cams = cameras(scene)
+    main = cams[0]
+    with SceneRenderer(model, cams) as renderer:
+        capture = renderer.render(data, main.name)
+    clean = capture.depth_m
+    depth = DepthNoise(noise, clean.shape).apply(clean)
+    pose = optical_pose(model, data, main.name)
+    p, q = pose.position, pose.orientation
+    matrix = np.eye(4)
+    matrix[:3, :3] = quat_matrix(q.x, q.y, q.z, q.w)
+    matrix[:3, 3] = (p.x, p.y, p.z)
+    lens = Intrinsics.from_k(camera_info(main).k)
+    top_pixels = visible_top_pixels(scene.camera, place(scene), clean)
+    truth = ground_truth(model, data, scene, top_pixels)
+    yield depth, capture.rgb, lens, matrix, truth
+
+
+def score(found: Found, truth: GroundTruth, camera_z: np.ndarray, errors: Errors) -> None:
+    """Pair detections with true boxes and add the errors."""
+    boxes: list[BoxTruth] = list(truth.boxes)
+    true_centres = np.array(
+        [[b.pose.position.x, b.pose.position.y, b.pose.position.z] for b in boxes]
+    )
+    carried = [sum(1 for b in boxes if b.on == i) for i in range(len(boxes))]
+    platform = {i for i, n in enumerate(carried) if n >= 2}
+    used: set[int] = set()
+    for box in found.boxes:
+        centre = np.array(box.centre)
+        if len(boxes) == 0:
+            errors.false += 1
+            continue
+        distances = np.linalg.norm(true_centres - centre, axis=1)
+        nearest = int(np.argmin(distances))
+        true = boxes[nearest]
+        reach = max(0.02, 0.5 * min(true.size.x, true.size.y))
+        if distances[nearest] > reach or nearest in used:
+            errors.false += 1
+            errors.notes.append(
+                f"false box at ({centre[0]:+.3f}, {centre[1]:+.3f}, {centre[2]:+.3f}) size "
+                f"{box.size[0]:.3f} x {box.size[1]:.3f} x {box.size[2]:.3f}"
+            )
+            continue
+        used.add(nearest)
+        if not true.top_in_view or nearest in platform:
+            continue  # found though cut off, or a platform: neither right nor wrong
+        errors.found += 1
+        distance_m = float(np.linalg.norm(np.array(box.top_middle) - camera_z))
+        scale = 0.4 / distance_m
+        errors.centre_mm.append(1000 * float(distances[nearest]))
+        errors.centre_share.append(100 * float(distances[nearest]) / distance_m)
+        q = true.pose.orientation
+        true_yaw = yaw_of(quat_matrix(q.x, q.y, q.z, q.w))
+        square = abs(true.size.x - true.size.y) < 0.005
+        errors.yaw_deg.append(yaw_error(box.yaw_deg, true_yaw, square))
+        size_err = [abs(box.size[0] - true.size.x), abs(box.size[1] - true.size.y)]
+        errors.size_mm.extend(1000 * s for s in size_err)
+        errors.size_mm_at_04.extend(1000 * s * scale for s in size_err)
+        errors.height_mm.append(1000 * abs(box.size[2] - true.size.z))
+    for index, true in enumerate(boxes):
+        if true.top_in_view and index not in used and index not in platform:
+            errors.missed += 1
+            p = true.pose.position
+            errors.notes.append(
+                f"missed box {index} at ({p.x:+.3f}, {p.y:+.3f}, {p.z:+.3f}) size "
+                f"{true.size.x:.3f} x {true.size.y:.3f} x {true.size.z:.3f}"
+            )
+
+
+def run_case(scenes: list[SceneDesc], noise: NoiseSpec | None, errors: Errors) -> None:
+    for scene in scenes:
+        used = noise if noise is not None else scene.noise
+        for depth, rgb, lens, pose, truth in render(scene, used):
+            finder = BoxFinder(FinderSettings())
+            started = time.perf_counter()
+            found = finder(depth, lens, pose, rgb)
+            errors.ms.append(1000 * (time.perf_counter() - started))
+            errors.pictures += 1
+            score(found, truth, pose[:3, 3], errors)
+
+
+def row(name: str, values: list[float], digits: int = 2) -> str:
+    if not values:
+        return f"  {name:<22} -"
+    v = np.asarray(values)
     return (
-        (middle.x - true_middle.x) * 1e3,
-        (middle.y - true_middle.y) * 1e3,
-        (bbox.size.z - true_height) * 1e3,
+        f"  {name:<22} {np.median(v):.{digits}f} / {np.percentile(v, 90):.{digits}f} / "
+        f"{v.max():.{digits}f}"
     )
 
 
-def summary(name: str, values: list[float], signed: bool = True) -> str:
-    magnitudes = [abs(v) for v in values]
-    bias = f" (mean signed {statistics.fmean(values):+.2f} mm)" if signed else ""
-    return (
-        f"{name:<10} median {statistics.median(magnitudes):.2f} mm, "
-        f"worst {max(magnitudes):.2f} mm{bias}"
-    )
-
-
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--boxes", type=int, default=50)
-    parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--random-yaw", action="store_true")
-    args = parser.parse_args()
-    rng = random.Random(args.seed)
-    boxes = [(0.065, 0.040, 0.06, 0.0)] + [
-        random_box(rng, args.random_yaw) for _ in range(args.boxes)
-    ]
-
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    procs = Processes(endpoint)
-    pairs = Pairs()
-    results: list[tuple[float, float, float]] = []
-    missed = 0
-    default: tuple[float, float, float] | None = None
-    start = time.monotonic()
-    try:
-        procs.start("router", "--listen", endpoint, connect=False)
-        time.sleep(1.0)  # the router binds its port; every other process retries until it does
-        with bus.open_bus(bus_args(endpoint)) as b:
-            b.subscribe_raw("detections", pairs.on_detections)
-            b.subscribe_raw("sim/ground_truth", pairs.on_truth)
-            procs.start("locator", "--log-interval-s", "60")
-            time.sleep(2.0)  # the locator subscribes before the first capture
-            for n, (x, y, size, yaw) in enumerate(boxes):
-                pairs.reset()
-                sim = procs.start(
-                    "sim",
-                    *("--rate-hz", "30", "--frames", "4"),
-                    *("--box-x", f"{x:.5f}", "--box-y", f"{y:.5f}"),
-                    *("--box-size", f"{size:.5f}", "--box-yaw-deg", f"{yaw:.3f}"),
-                )
-                sim.wait(timeout=60)
-                # The first capture of each new sim goes back in time and is dropped.
-                pairs.wait(2, timeout_s=5.0)
-                found = [e for e in (errors_mm(d, t) for d, t in pairs.paired()) if e]
-                if not found:
-                    missed += 1
-                    why = "no box in its detections" if pairs.paired() else "no detection came"
-                    print(
-                        f"  missed box {n}: ({x:+.4f}, {y:+.4f}), {size * 100:.1f} cm, "
-                        f"yaw {yaw:.0f} deg: {why}; sim said: {procs.stop(sim).strip()[-300:]}"
-                    )
-                    continue
-                if n == 0:
-                    default = found[-1]
-                else:
-                    results.append(found[-1])
-                if n % 10 == 0:
-                    print(f"  {n} of {len(boxes) - 1} boxes, {time.monotonic() - start:.0f} s")
-    finally:
-        procs.stop_all()
-    if not results:
-        print("no box was measured")
-        return 1
+def report(title: str, errors: Errors, verbose: bool) -> None:
     print(
-        f"{len(results)} random boxes measured, {missed} missed; seed's method against "
-        "sim/ground_truth:"
+        f"{title}: {errors.pictures} pictures, {errors.found} boxes found, {errors.missed} "
+        f"missed, {errors.false} false; {np.median(errors.ms) if errors.ms else 0:.1f} ms a "
+        "picture (median)"
     )
-    print(summary("middle x", [r[0] for r in results]))
-    print(summary("middle y", [r[1] for r in results]))
-    print(summary("distance", [math.hypot(r[0], r[1]) for r in results], signed=False))
-    print(summary("height", [r[2] for r in results]))
-    if default is not None:
-        print(
-            f"default scene (0.065, 0.040), 6 cm: x {default[0]:+.2f} mm, "
-            f"y {default[1]:+.2f} mm, height {default[2]:+.2f} mm"
-        )
-    return 0
+    print("  (median / p90 / worst)")
+    print(row("centre, mm", errors.centre_mm))
+    print(row("centre, % of distance", errors.centre_share, 3))
+    print(row("yaw, deg", errors.yaw_deg))
+    print(row("length/width, mm", errors.size_mm))
+    print(row("length/width at 0.4 m", errors.size_mm_at_04))
+    print(row("height, mm", errors.height_mm))
+    if verbose:
+        for note in errors.notes[:20]:
+            print(f"    {note}")
+    sys.stdout.flush()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, allow_abbrev=False)
+    parser.add_argument("--scenes", type=int, default=30, help="random scenes per case (30)")
+    parser.add_argument("--empty", type=int, default=50, help="empty tables per noise (50)")
+    parser.add_argument("--seed", type=int, default=1, help="the first random scene's seed")
+    parser.add_argument("--only", help="run only the cases whose title contains this")
+    parser.add_argument("--verbose", action="store_true", help="list missed and false boxes")
+    args = parser.parse_args()
+    seeds = range(args.seed, args.seed + args.scenes)
+
+    def randoms(boxes: int, objects: int) -> list[SceneDesc]:
+        return [random_scene(s, boxes=boxes, objects=objects) for s in seeds]
+
+    def empty() -> list[SceneDesc]:
+        return [
+            replace(random_scene(s, boxes=1, objects=0), boxes=())
+            for s in range(args.seed, args.seed + args.empty)
+        ]
+
+    cases: list[tuple[str, list[SceneDesc] | None, NoiseSpec | None]] = [
+        ("seed's world, noise-free", [seed_scene()], PRESETS["none"]),
+        ("random, noise-free", None, PRESETS["none"]),
+        ("random, sigma 1 mm", None, NoiseSpec(model="gaussian", sigma_m=0.001)),
+        (
+            "empty tables, sigma 3 mm + speckle + edges",
+            None,
+            NoiseSpec(
+                model="gaussian",
+                sigma_m=0.003,
+                speckle_share=0.002,
+                clump_px=3,
+                edge_px=2,
+                flying_share=0.2,
+            ),
+        ),
+        ("empty tables, d435", None, PRESETS["d435"]),
+        ("empty tables, azure_kinect", None, PRESETS["azure_kinect"]),
+        ("pallet, d435", [spec.load(SCENES / "pallet.toml")], PRESETS["d435"]),
+        ("pallet, azure_kinect", [spec.load(SCENES / "pallet.toml")], PRESETS["azure_kinect"]),
+        ("clutter, d435", [spec.load(SCENES / "clutter.toml")], PRESETS["d435"]),
+        ("clutter, azure_kinect", [spec.load(SCENES / "clutter.toml")], PRESETS["azure_kinect"]),
+    ]
+    for title, scenes, noise in cases:
+        if args.only and args.only not in title:
+            continue
+        if scenes is None:
+            scenes = empty() if title.startswith("empty") else randoms(8, 3)
+        errors = Errors()
+        run_case(scenes, noise, errors)
+        report(title, errors, args.verbose)
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    main()
