@@ -1,0 +1,101 @@
+"""Depth noise on known surfaces: each model's measured spread against its formula."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import numpy.typing as npt
+import pytest
+
+from onebox.world.noise import PRESETS, DepthNoise, NoiseSpec
+
+SHAPE = (480, 640)
+
+
+def ramp(near_m: float, far_m: float) -> npt.NDArray[np.float32]:
+    """A flat surface seen at a slant: depth rising evenly from the top row to the bottom."""
+    column = np.linspace(near_m, far_m, SHAPE[0], dtype=np.float32)
+    return np.repeat(column[:, None], SHAPE[1], axis=1)
+
+
+def errors(spec: NoiseSpec, clean: npt.NDArray[np.float32], frames: int = 3) -> np.ndarray:
+    noise = DepthNoise(spec, SHAPE)
+    return np.stack([noise.apply(clean) - clean for _ in range(frames)])
+
+
+@pytest.mark.parametrize(
+    ("spec", "near_m", "far_m"),
+    [
+        (NoiseSpec(model="gaussian", sigma_m=0.004), 1.0, 1.0),
+        (PRESETS["gaussian"], 0.5, 0.6),
+        (PRESETS["axial"], 2.0, 2.0),
+        (PRESETS["axial"], 0.5, 0.5),
+        (PRESETS["quantise"], 1.0, 1.1),
+        (NoiseSpec(model="quantise", step_m=0.005), 1.0, 1.5),
+        (PRESETS["d435"], 1.0, 1.0),
+        (PRESETS["d435"], 2.0, 2.0),
+        (PRESETS["azure_kinect"], 2.5, 2.5),
+    ],
+)
+def test_measured_sigma_on_a_flat_surface_follows_the_formula(
+    spec: NoiseSpec, near_m: float, far_m: float
+) -> None:
+    """sigma(z) = sigma_m + a + b (z - c)^2, with step / sqrt(12) of rounding, within 10 %."""
+    clean = ramp(near_m, far_m)
+    err = errors(spec, clean).astype(np.float64)
+    z = np.broadcast_to(clean, err.shape)
+    expected = np.array([spec.expected_sigma(d) for d in np.unique(clean)])
+    kept = np.abs(err) < 0.1 * z  # speckle is far off the surface, counted on its own below
+    assert kept.mean() > 0.99
+    measured = np.sqrt(np.mean(err[kept] ** 2))
+    want = float(np.sqrt(np.mean(expected**2)))
+    assert measured == pytest.approx(want, rel=0.10), (measured, want)
+
+
+def test_none_leaves_the_picture_alone() -> None:
+    """Model none returns the rendered depth untouched."""
+    clean = ramp(0.5, 1.0)
+    assert DepthNoise(PRESETS["none"], SHAPE).apply(clean) is clean
+
+
+@pytest.mark.parametrize("name", ["speckle", "d435"])
+def test_speckle_share_and_clumps(name: str) -> None:
+    """The speckle share of the readings are much nearer (30-80 %), in clumps up to clump_px."""
+    spec = PRESETS[name]
+    clean = ramp(1.0, 1.0)
+    err = errors(spec, clean, frames=8)
+    speckled = err < -0.1
+    assert speckled.mean() == pytest.approx(spec.speckle_share, rel=0.10)
+    ratio = 1 + err[speckled]  # the true depth is 1 m
+    assert ratio.min() >= 0.3 - 1e-6 and ratio.max() <= 0.8 + 1e-6
+    # clumps: many speckled pixels have a speckled neighbour
+    frame = speckled[0]
+    neighbour = frame[:, 1:] & frame[:, :-1]
+    assert neighbour.sum() > 0.2 * frame.sum()
+
+
+def test_edges_lose_their_readings_and_fly() -> None:
+    """Within edge_px of a depth step no reading, but flying_share of the band lies between."""
+    spec = dataclasses.replace(PRESETS["edge_dropout"], edge_px=2, flying_share=0.2)
+    clean = np.full(SHAPE, 1.0, np.float32)
+    clean[:, 320:] = 1.5
+    out = np.stack([DepthNoise(spec, SHAPE, stream=i).apply(clean) for i in range(3)])
+    band = out[:, :, 318:322]
+    assert np.array_equal(out[:, :, :318], np.broadcast_to(clean[:, :318], out[:, :, :318].shape))
+    assert np.array_equal(out[:, :, 322:], np.broadcast_to(clean[:, 322:], out[:, :, 322:].shape))
+    flying = np.isfinite(band)
+    assert flying.mean() == pytest.approx(0.2, rel=0.10)
+    assert np.all((band[flying] >= 1.0) & (band[flying] <= 1.5))
+
+
+def test_the_same_seed_gives_the_same_noise() -> None:
+    """Two cameras with one seed give identical noisy pictures; another seed does not."""
+    clean = ramp(0.8, 2.0)
+    spec = PRESETS["d435"]
+    a = [DepthNoise(spec, SHAPE).apply(clean)]
+    first, second = DepthNoise(spec, SHAPE), DepthNoise(spec, SHAPE)
+    for _ in range(3):
+        assert first.apply(clean).tobytes() == second.apply(clean).tobytes()
+    other = DepthNoise(dataclasses.replace(spec, seed=1), SHAPE).apply(clean)
+    assert other.tobytes() != a[0].tobytes()
