@@ -133,15 +133,15 @@ def test_basic_camera_patch_is_the_seeds_table(default_run: Run) -> None:
     assert patch == SEED_PATCH
 
 
-def test_every_pixel_into_the_room_gives_the_seeds_counts(default_run: Run) -> None:
+def assert_seeds_counts(run: Run) -> None:
     """Published lens + tf_static turn the capture into 76,800 / 2,582 / 2,401 points."""
-    info = default_run.first("camera/camera_info")
+    info = run.first("camera/camera_info")
     assert isinstance(info, CameraInfo)
-    depth = depth_of(default_run.first("camera/depth/image_raw")).astype(np.float64)
+    depth = depth_of(run.first("camera/depth/image_raw")).astype(np.float64)
     fx, cx, fy, cy = info.k[0], info.k[2], info.k[4], info.k[5]
     v, u = np.mgrid[0 : info.height, 0 : info.width]  # the middle of pixel u is at u
     camera = np.stack([(u - cx) * depth / fx, (v - cy) * depth / fy, depth], axis=-1)
-    tf = default_run.first("tf_static")
+    tf = run.first("tf_static")
     assert isinstance(tf, TFMessage)
     m = world_from_optical(tf)
     points = camera.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
@@ -150,9 +150,16 @@ def test_every_pixel_into_the_room_gives_the_seeds_counts(default_run: Run) -> N
     top = standing[standing[:, 2] > top_z - 0.001]
     assert (len(points), len(standing), len(top)) == (76_800, 2_582, 2_401)
     assert f"{top[:, 0].mean():+.3f} {top[:, 1].mean():+.3f} {top_z:.3f}" == "+0.064 +0.040 0.060"
-    truth = default_run.first("sim/ground_truth")
+    truth = run.first("sim/ground_truth")
     assert isinstance(truth, GroundTruth) and truth.box_pose and truth.box_size
     assert abs(top_z - (truth.box_pose.position.z + truth.box_size.z / 2)) < 1e-4
+    patch = depth_of(run.first("basic_camera/depth/image_raw"))[19:24, 43:51]
+    assert "\n".join(" ".join(f"{d:.3f}" for d in row) for row in patch) == SEED_PATCH
+
+
+def test_every_pixel_into_the_room_gives_the_seeds_counts(default_run: Run) -> None:
+    """Published lens + tf_static turn the capture into 76,800 / 2,582 / 2,401 points."""
+    assert_seeds_counts(default_run)
 
 
 def test_frames_agree_with_mujocos_camera(default_run: Run) -> None:
@@ -306,3 +313,113 @@ def test_honcho_starts_router_and_sim() -> None:
         out, _ = honcho.communicate(timeout=30)
     assert "router" in out and "sim" in out
     assert "Traceback" not in out, out
+
+
+SCENE_DIR = ROOT / "scene"
+
+
+@pytest.mark.parametrize(
+    ("name", "width", "height", "boxes", "objects"),
+    [("one_box", 320, 240, 1, 0), ("pallet", 640, 480, 13, 1), ("clutter", 1280, 720, 3, 5)],
+)
+def test_each_committed_scene_publishes(
+    processes: Processes, router: str, name: str, width: int, height: int, boxes: int, objects: int
+) -> None:
+    """--scene FILE builds the file's world: its picture size, every box and object in truth."""
+    run = run_sim(processes, router, "--scene", str(SCENE_DIR / f"{name}.toml"), frames=1)
+    depth = depth_of(run.first("camera/depth/image_raw"))
+    assert depth.shape == (height, width)
+    assert np.isfinite(depth).mean() > 0.9
+    truth = run.first("sim/ground_truth")
+    assert isinstance(truth, GroundTruth)
+    assert (len(truth.boxes), len(truth.objects)) == (boxes, objects)
+    assert all(b.top_in_view for b in truth.boxes)
+    assert truth.header.stamp_ns == run.first("camera/depth/image_raw").header.stamp_ns  # type: ignore[attr-defined]
+    if name == "one_box":
+        assert_seeds_counts(run)
+
+
+def test_scene_setting_and_lens_flag_together(processes: Processes, router: str) -> None:
+    """ONEBOX_SCENE picks the pallet; --hfov-deg 90 still overrides its lens."""
+    run = run_sim(
+        processes,
+        router,
+        "--hfov-deg",
+        "90",
+        env={"ONEBOX_SCENE": str(SCENE_DIR / "pallet.toml")},
+        frames=1,
+    )
+    info = run.first("camera/camera_info")
+    assert isinstance(info, CameraInfo)
+    assert (info.width, info.height) == (640, 480)
+    assert info.k[0] == pytest.approx(320.0)
+
+
+def test_depth_in_millimetres(processes: Processes, router: str) -> None:
+    """--depth-encoding 16UC1 publishes whole millimetres: the box's top reads 340."""
+    run = run_sim(processes, router, "--depth-encoding", "16UC1", frames=1)
+    image = run.first("camera/depth/image_raw")
+    assert isinstance(image, Image) and image.encoding == "16UC1" and image.step == 320 * 2
+    mm = np.frombuffer(image.data, "<u2").reshape(240, 320)
+    assert (mm[86, 212], mm[120, 160]) == (340, 400)
+
+
+def test_random_scene_written_and_read_back(processes: Processes, router: str, tmp_path) -> None:
+    """--random-scene 5 --write-scene saves a file that --scene builds into the same world."""
+    path = tmp_path / "five.toml"
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "services.cli",
+            "sim",
+            "--random-scene",
+            "5",
+            "--write-scene",
+            str(path),
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 0, proc.stderr
+    first = run_sim(processes, router, "--random-scene", "5", frames=1)
+    again = run_sim(processes, router, "--scene", str(path), frames=1)
+    for key in ("camera/image_raw", "camera/depth/image_raw"):
+        assert first.first(key).data == again.first(key).data  # type: ignore[attr-defined]
+    truth = again.first("sim/ground_truth")
+    assert isinstance(truth, GroundTruth) and len(truth.boxes) == 6
+
+
+def test_noise_flag_roughens_the_depth(processes: Processes, router: str) -> None:
+    """--noise d435 roughens the table's 0.400 m by the D435's 0.6 mm, plus a few speckles."""
+    run = run_sim(processes, router, "--noise", "d435", frames=1)
+    depth = depth_of(run.first("camera/depth/image_raw"))
+    table = depth[150:230, 10:150]
+    near = np.abs(table - 0.400) < 0.01
+    assert 0.0004 < np.std(table[near]) < 0.0009
+    assert 0 < (table < 0.35).sum() < 0.01 * table.size  # speckle, much nearer
+
+
+@pytest.mark.parametrize(
+    ("text", "named"),
+    [
+        ("[[box]]\nx = 0\ny = 0\nsize = [0.1, 0.1, 0.1]\ncolor = [1, 0, 0, 1]\n", "box[0].color"),
+        ("[[box]]\nx = 0\ny = 0\nsize = [0.1, 0.1, 0.1]\non = 0\n", "box[0].on"),
+    ],
+)
+def test_bad_scene_file_is_one_line(router: str, tmp_path, text: str, named: str) -> None:
+    """A scene file with an unknown key or a box on nothing stops the sim with one line."""
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    proc = subprocess.run(
+        [sys.executable, "-m", "services.cli", "sim", "--scene", str(path), "--connect", router],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 2
+    assert named in proc.stderr and "Traceback" not in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
