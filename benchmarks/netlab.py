@@ -1,0 +1,318 @@
+"""Hosts in network namespaces, for the multi-host test and benchmark (root only).
+
+Three hosts A, B and C (namespaces ``ob<id>a`` ...) hang off one bridge in a fourth namespace,
+addresses 10.213.<n>.1-3/24, a range that exists only inside these namespaces: no traffic
+leaves them. Each host runs its own ``onebox router`` on loopback and on its address, connected
+to the other two. :meth:`Lab.link` takes a host's link down or up. Everything is removed on
+exit, also on failure.
+
+Shared memory is off in config/*.json5, so pictures cross the links as bytes (namespaces
+share /dev/shm; with shared memory on they would not travel at all).
+
+:class:`LossyProxy` forwards TCP between two routers with a delay and "loss": TCP never loses
+bytes, a lost segment is retransmitted after the retransmission timeout (Linux's least is
+200 ms), so loss is emulated as that stall on 5 % of the chunks forwarded.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import os
+import random
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+HOSTS = ("a", "b", "c")
+PORT = 7447
+
+PROBE = r"""
+import sys, time, zenoh
+config = zenoh.Config.from_file("config/client.json5")
+def on(sample):
+    print(str(sample.key_expr), f"{time.monotonic():.4f}", flush=True)
+with zenoh.open(config) as s:
+    s.declare_subscriber("camera/depth/image_raw", on)
+    s.declare_subscriber("detections", on)
+    print("probe ready", flush=True)
+    sys.stdin.read()
+"""
+"""A subscriber printing ``key monotonic-time`` for each depth picture and detection."""
+
+
+def can_run() -> str | None:
+    """None when namespaces can be made here, else why not."""
+    if os.geteuid() != 0:
+        return "needs root for ip netns"
+    name = f"ob{os.getpid()}probe"
+    result = subprocess.run(["ip", "netns", "add", name], capture_output=True, text=True)
+    if result.returncode != 0:
+        return f"ip netns add failed: {result.stderr.strip()}"
+    subprocess.run(["ip", "netns", "del", name], check=False)
+    return None
+
+
+def _ip(*args: str, ns: str | None = None) -> None:
+    cmd = ["ip", "netns", "exec", ns, "ip", *args] if ns else ["ip", *args]
+    subprocess.run(cmd, check=True, capture_output=True)
+
+
+class Lab:
+    """Three hosts on one bridge; routers started by :meth:`start_routers`."""
+
+    def __init__(self, subnet: int = 1) -> None:
+        self.tag = f"ob{os.getpid() % 100000}"
+        self.subnet = subnet
+        self.switch = f"{self.tag}sw"
+        self.procs: list[subprocess.Popen[str]] = []
+
+    def ns(self, host: str) -> str:
+        return f"{self.tag}{host}"
+
+    def address(self, host: str) -> str:
+        return f"10.213.{self.subnet}.{HOSTS.index(host) + 1}"
+
+    def __enter__(self) -> Lab:
+        try:
+            subprocess.run(["ip", "netns", "add", self.switch], check=True, capture_output=True)
+            _ip("link", "add", "br0", "type", "bridge", ns=self.switch)
+            _ip("link", "set", "br0", "up", ns=self.switch)
+            for host in HOSTS:
+                ns = self.ns(host)
+                subprocess.run(["ip", "netns", "add", ns], check=True, capture_output=True)
+                _ip("link", "set", "lo", "up", ns=ns)
+                _ip(
+                    "link",
+                    "add",
+                    "eth0",
+                    "netns",
+                    ns,
+                    "type",
+                    "veth",
+                    "peer",
+                    "name",
+                    f"p{host}",
+                    "netns",
+                    self.switch,
+                    ns=self.switch,
+                )
+                _ip("link", "set", f"p{host}", "master", "br0", ns=self.switch)
+                _ip("link", "set", f"p{host}", "up", ns=self.switch)
+                _ip("addr", "add", f"{self.address(host)}/24", "dev", "eth0", ns=ns)
+                _ip("link", "set", "eth0", "up", ns=ns)
+        except BaseException:
+            self.__exit__(None, None, None)
+            raise
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for proc in reversed(self.procs):
+            if proc.poll() is None:
+                proc.terminate()
+        for proc in reversed(self.procs):
+            try:
+                proc.wait(5)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+            for pipe in (proc.stdin, proc.stdout):
+                if pipe is not None:
+                    with contextlib.suppress(OSError):
+                        pipe.close()
+        for name in (*(self.ns(h) for h in HOSTS), self.switch):
+            subprocess.run(["ip", "netns", "del", name], check=False, capture_output=True)
+
+    def run(self, host: str, *argv: str, stdin: bool = False) -> subprocess.Popen[str]:
+        """Start ``argv`` inside ``host``'s namespace; output captured, unbuffered."""
+        proc = subprocess.Popen(
+            ["ip", "netns", "exec", self.ns(host), *argv],
+            cwd=ROOT,
+            env={**os.environ, "PYTHONUNBUFFERED": "1"},
+            stdin=subprocess.PIPE if stdin else subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
+        self.procs.append(proc)
+        return proc
+
+    def onebox(self, host: str, *argv: str) -> subprocess.Popen[str]:
+        return self.run(host, sys.executable, "-m", "services.cli", *argv)
+
+    def start_routers(self, via: dict[str, str] | None = None) -> list[subprocess.Popen[str]]:
+        """A router per host on loopback and its address, connected to the others.
+
+        ``via`` maps a host to an endpoint the others use to reach it (a proxy)."""
+        via = via or {}
+        routers = []
+        for host in HOSTS:
+            others = [
+                via.get(o, f"tcp/{self.address(o)}:{PORT}")
+                for o in HOSTS
+                if o != host and HOSTS.index(o) < HOSTS.index(host)
+            ]
+            argv = [
+                "router",
+                "--listen",
+                f"tcp/127.0.0.1:{PORT}",
+                "--listen",
+                f"tcp/{self.address(host)}:{PORT}",
+            ]
+            for endpoint in others:
+                argv += ["--connect", endpoint]
+            routers.append(self.onebox(host, *argv))
+        return routers
+
+    def link(self, host: str, up: bool) -> None:
+        """Take ``host``'s only link down or bring it up (its bridge port)."""
+        _ip("link", "set", f"p{host}", "up" if up else "down", ns=self.switch)
+
+    def probe(self, host: str) -> Probe:
+        return Probe(self.run(host, sys.executable, "-c", PROBE, stdin=True))
+
+
+class Probe:
+    """Arrival times of depth pictures and detections at one host."""
+
+    def __init__(self, proc: subprocess.Popen[str]) -> None:
+        self.proc = proc
+        self.times: dict[str, list[float]] = {"camera/depth/image_raw": [], "detections": []}
+        self._cond = threading.Condition()
+        self.ready = threading.Event()
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            if line.startswith("probe ready"):
+                self.ready.set()
+                continue
+            parts = line.split()
+            if len(parts) == 2 and parts[0] in self.times:
+                with self._cond:
+                    self.times[parts[0]].append(float(parts[1]))
+                    self._cond.notify_all()
+
+    def wait_for(self, key: str, after: float, timeout_s: float) -> float | None:
+        """The first arrival on ``key`` after monotonic ``after``, waiting up to ``timeout_s``."""
+
+        def first() -> float | None:
+            return next((t for t in self.times[key] if t > after), None)
+
+        with self._cond:
+            self._cond.wait_for(lambda: first() is not None, timeout=timeout_s)
+            return first()
+
+    def max_gap(self, key: str, start: float, end: float) -> float:
+        """The longest time without ``key`` between ``start`` and ``end``."""
+        with self._cond:
+            times = [start, *(t for t in self.times[key] if start < t < end), end]
+        return max(b - a for a, b in itertools.pairwise(times))
+
+    def count(self, key: str, start: float, end: float) -> int:
+        with self._cond:
+            return sum(1 for t in self.times[key] if start < t < end)
+
+
+class LossyProxy:
+    """TCP forwarder adding ``delay_s`` each way and a ``stall_s`` stall to ``loss`` of chunks."""
+
+    def __init__(
+        self,
+        listen: tuple[str, int],
+        target: tuple[str, int],
+        delay_s: float,
+        loss: float,
+        stall_s: float = 0.2,
+        seed: int = 1,
+    ) -> None:
+        self.listen, self.target = listen, target
+        self.delay_s, self.loss, self.stall_s = delay_s, loss, stall_s
+        self.random = random.Random(seed)
+
+    async def _pipe(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        queue: asyncio.Queue[tuple[float, bytes]] = asyncio.Queue()
+        last = 0.0
+
+        async def send() -> None:
+            while True:
+                due, data = await queue.get()
+                if not data:
+                    break
+                await asyncio.sleep(max(0.0, due - time.monotonic()))
+                writer.write(data)
+                await writer.drain()
+            writer.close()
+
+        sender = asyncio.create_task(send())
+        while data := await reader.read(65536):
+            extra = self.stall_s if self.random.random() < self.loss else 0.0
+            last = max(last, time.monotonic() + self.delay_s + extra)  # in order, as TCP is
+            await queue.put((last, data))
+        await queue.put((0.0, b""))
+        await sender
+
+    async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        with contextlib.suppress(OSError):
+            up_reader, up_writer = await asyncio.open_connection(*self.target)
+            await asyncio.gather(
+                self._pipe(reader, up_writer), self._pipe(up_reader, writer), return_exceptions=True
+            )
+
+    async def serve(self) -> None:
+        server = await asyncio.start_server(self._client, *self.listen)
+        async with server:
+            await server.serve_forever()
+
+
+@contextlib.contextmanager
+def lossy_proxy_process(
+    lab: Lab, host: str, listen_port: int, delay_s: float, loss: float
+) -> Iterator[str]:
+    """A :class:`LossyProxy` in ``host``'s namespace in front of its router; yields its endpoint."""
+    code = (
+        "import asyncio, sys; sys.path.insert(0, 'benchmarks'); import netlab; "
+        f"asyncio.run(netlab.LossyProxy(('{lab.address(host)}', {listen_port}), "
+        f"('127.0.0.1', {PORT}), {delay_s}, {loss}).serve())"
+    )
+    proc = lab.run(host, sys.executable, "-c", code)
+    try:
+        yield f"tcp/{lab.address(host)}:{listen_port}"
+    finally:
+        proc.terminate()
+
+
+@contextlib.contextmanager
+def pipeline(lab: Lab, sim_args: tuple[str, ...] = ()) -> Iterator[Probe]:
+    """Routers on every host, the sim on A, the locator on B, a probe on C; yields the probe
+    once C receives detections (so the whole path works)."""
+    lab.start_routers()
+    probe = lab.probe("c")
+    if not probe.ready.wait(30):
+        raise RuntimeError("the probe on C did not start")
+    lab.onebox("b", "locator")
+    lab.onebox("a", "sim", *sim_args)
+    if probe.wait_for("detections", 0.0, 90) is None:
+        raise RuntimeError("no detection reached C from B within 90 s")
+    yield probe
+
+
+def outage(
+    lab: Lab, probe: Probe, host: str = "b", down_s: float = 15.0, recover_timeout_s: float = 60.0
+) -> tuple[float | None, float]:
+    """Take ``host``'s link down ``down_s``, bring it back; returns (seconds from the link's
+    return to the first detection at C, or None; the longest depth gap at C while it was down)."""
+    lab.link(host, up=False)
+    down_at = time.monotonic()
+    time.sleep(down_s)  # the outage itself is what is measured: its length is the experiment
+    lab.link(host, up=True)
+    up_at = time.monotonic()
+    gap = probe.max_gap("camera/depth/image_raw", down_at, up_at)
+    first = probe.wait_for("detections", up_at, recover_timeout_s)
+    return (None if first is None else first - up_at), gap
