@@ -84,7 +84,7 @@ def log_file(path: Path, scene: rerun_scene.SceneLog, namespace: str, recover: b
             kind = scene.log(name, message)
         except (msgspec.DecodeError, msgspec.ValidationError, ValueError, OverflowError) as e:
             # ValueError covers the scene's BadMessage and ImageError.
-            limiter.warn(item.key, "bad", f"skipped: {e}")
+            limiter.warn(item.key, str(e)[:24], f"skipped: {e}")
             continue
         if kind is None:
             skipped += 1

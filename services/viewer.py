@@ -199,7 +199,7 @@ def main(args: argparse.Namespace) -> int:
                 except (ValueError, OverflowError) as e:
                     # BadMessage and ImageError are ValueErrors; whatever else Rerun refuses
                     # in a message is too. One bad message never stops the viewer.
-                    limiter.warn(name, type(e).__name__, f"not shown: {e}")
+                    limiter.warn(name, str(e)[:24], f"not shown: {e}")
                     continue
                 stamp_ns = getattr(getattr(message, "header", None), "stamp_ns", None)
                 if kind is None or stamp_ns is None:
