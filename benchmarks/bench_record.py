@@ -1,6 +1,6 @@
 """How fast ``onebox record`` writes, beside a running sim and on its own.
 
-    python benchmarks/bench_record.py            # 10 s of 640 x 480 at 30 Hz, then standalone
+    python benchmarks/bench_record.py            # 10 s of 640 x 480 at 30 Hz, zstd and none
     python benchmarks/bench_record.py --seconds 20 --compression lz4
 
 1. Beside a running sim: a private router, ``onebox sim --width 640 --height 480 --rate-hz 30``
@@ -8,6 +8,8 @@
    the recorder's sustained MB/s and messages/s (over the log times of what it wrote) and the
    colour and depth captures it dropped, counted by stamp against the captures the sim made.
    With ``--fast`` the sim runs as fast as it can, to find where the recorder starts to drop.
+   Each ``--compression`` (default: zstd, the recorder's default, then none) is one run, and
+   the file sizes are printed side by side.
 2. Standalone: the same colour + depth payloads written straight through RecordingWriter, as
    fast as it takes them: MB/s and messages/s, to the page cache and including an fsync.
 """
@@ -22,7 +24,6 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -32,7 +33,7 @@ sys.path.insert(0, str(ROOT))
 from onebox import bus  # noqa: E402
 from onebox.recording import RecordingWriter, iter_messages  # noqa: E402
 from onebox.testing.processes import bus_args, free_port  # noqa: E402
-from schemas import Header, Image, codec  # noqa: E402
+from schemas import Header, Image, Message, codec  # noqa: E402
 
 CAMERA_KEYS = ("camera/image_raw", "camera/depth/image_raw")
 WIDTH, HEIGHT = 640, 480
@@ -79,15 +80,11 @@ def wait_port(port: int, timeout_s: float = 15.0) -> None:
 def wait_subscribed(endpoint: str, key: str, timeout_s: float = 30.0) -> None:
     """Until the recorder's subscription is known on the router."""
     with bus.open_bus(bus_args(endpoint)) as b:
-        probe: Any = b.session.declare_publisher(key)
-        deadline = time.monotonic() + timeout_s
-        while not probe.matching_status.matching:
-            if time.monotonic() > deadline:
-                raise RuntimeError(f"the recorder did not subscribe to {key} in {timeout_s} s")
-            time.sleep(0.05)
+        if not b.publisher(key, Message).wait_for_subscribers(timeout_s):
+            raise RuntimeError(f"the recorder did not subscribe to {key} in {timeout_s} s")
 
 
-def beside_sim(workdir: Path, seconds: float, rate_hz: float, fast: bool, compression: str) -> None:
+def beside_sim(workdir: Path, seconds: float, rate_hz: float, fast: bool, compression: str) -> int:
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     out = workdir / "beside_sim.mcap"
@@ -136,7 +133,10 @@ def beside_sim(workdir: Path, seconds: float, rate_hz: float, fast: bool, compre
     print(f"  sustained {nbytes / 1e6 / span_s:.1f} MB/s, {count / span_s:.0f} messages/s")
     print(f"  dropped (by stamp): {', '.join(f'{k} {n}' for k, n in dropped.items())}")
     print(f"  recorder: {record_log[-1] if record_log else '(no output)'}")
+    size = out.stat().st_size
+    print(f"  file {size / 1e6:.1f} MB ({size / max(nbytes, 1):.0%} of the messages' bytes)")
     out.unlink()
+    return size
 
 
 def payloads(n: int) -> list[bytes]:
@@ -200,15 +200,30 @@ def main() -> int:
     parser.add_argument("--seconds", type=float, default=10.0, help="how long the sim runs")
     parser.add_argument("--rate-hz", type=float, default=30.0)
     parser.add_argument("--fast", action="store_true", help="run the sim as fast as it can")
-    parser.add_argument("--compression", default="none", choices=["none", "lz4", "zstd"])
+    parser.add_argument(
+        "--compression",
+        action="append",
+        choices=["none", "lz4", "zstd"],
+        help="repeatable; default zstd (the recorder's default) and none, side by side",
+    )
     parser.add_argument("--standalone-mb", type=float, default=1000.0)
     parser.add_argument("--skip-sim", action="store_true")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="bench_record_") as tmp:
         workdir = Path(tmp)
+        compressions = args.compression or ["zstd", "none"]
+        sizes: dict[str, int] = {}
         if not args.skip_sim:
-            beside_sim(workdir, args.seconds, args.rate_hz, args.fast, args.compression)
-        standalone(workdir, args.standalone_mb, args.compression)
+            for compression in compressions:
+                sizes[compression] = beside_sim(
+                    workdir, args.seconds, args.rate_hz, args.fast, compression
+                )
+            print(
+                f"file size of {args.seconds:g} s: "
+                + ", ".join(f"{c} {n / 1e6:.1f} MB" for c, n in sizes.items())
+            )
+        for compression in compressions:
+            standalone(workdir, args.standalone_mb, compression)
     return 0
 
 
