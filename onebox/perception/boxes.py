@@ -41,12 +41,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import numpy.typing as npt
 from scipy import ndimage
-from scipy.spatial.transform import Rotation
 
 from onebox.geometry import Intrinsics
 from onebox.perception import segment
-from onebox.perception.rectangle import Rectangle, fit_rectangle
-from onebox.perception.support import Support, fit_support, support_holds
+from onebox.perception.rectangle import Rectangle, fit_rectangles
+from onebox.perception.support import SIGMA_FLOOR_M, Support, fit_support, support_holds
 
 Float32Array = npt.NDArray[np.float32]
 Float64Array = npt.NDArray[np.float64]
@@ -126,21 +125,27 @@ class Found:
     frame: str = "camera"
 
 
+PAD = 2
+"""Empty pixels around the working crop, so looking two pixels past a top never wraps."""
+NEIGHBOURS = 4
+
+
 @dataclass
 class _Plateau:
     label: int
+    """Index among the picture's tops; ``labels_top`` holds label + 1."""
     height_m: float
     tolerance_m: float
-    rows: npt.NDArray[np.intp]
-    cols: npt.NDArray[np.intp]
+    pixels: int
+    footprint_m: float
+    visible_m2: float
     rect: Rectangle | None = None
     is_box: bool = False
     score: float = 0.0
-    normal_c: Float64Array | None = None
     base_m: float = 0.0
     on_plateau: int | None = None
-    window: tuple[slice, slice] = (slice(0, 0), slice(0, 0))
-    """The piece's rows and columns in the crop (for the curvature test)."""
+    platform: bool = False
+    """A level others stand on whose own extent is hidden (a pallet's top): never a box."""
 
 
 @functools.lru_cache(maxsize=8)
@@ -197,8 +202,21 @@ def find_boxes(
         return Found(support, [], frame)
     basis = _plane_basis(support, camera_to_world)
     boxes = [p for p in plateaus if p.is_box]
-    _bases(boxes, plateaus, height_m, labels_top, lens, support, basis, settings)
-    return Found(support, _report(boxes, support, basis, camera_to_world, settings), frame)
+    _bases(boxes, plateaus, height_m, labels_top, lens, support, settings)
+    reported = [b for b in boxes if not b.platform]
+    return Found(support, _report(reported, support, basis, camera_to_world, settings), frame)
+
+
+def _crop(standing: BoolArray) -> tuple[slice, slice] | None:
+    """The rows and columns holding standing pixels, one pixel wider for the steps."""
+    row_any = np.flatnonzero(standing.any(axis=1))
+    if len(row_any) == 0:
+        return None
+    col_any = np.flatnonzero(standing.any(axis=0))
+    rows_n, cols_n = standing.shape
+    r0, r1 = max(int(row_any[0]) - 1, 0), min(int(row_any[-1]) + 2, rows_n)
+    c0, c1 = max(int(col_any[0]) - 1, 0), min(int(col_any[-1]) + 2, cols_n)
+    return slice(r0, r1), slice(c0, c1)
 
 
 def _plateaus(
@@ -208,6 +226,8 @@ def _plateaus(
     settings: FinderSettings,
     support: Support,
 ) -> tuple[list[_Plateau], Float32Array, npt.NDArray[np.int32]]:
+    """Every flat top, measured together: whole-array work on the crop, then one short
+    rectangle fit per top."""
     rows_n, cols_n = depth.shape
     slope = _slope(cols_n, rows_n, lens, support.normal_camera)
     height = depth * slope
@@ -215,194 +235,461 @@ def _plateaus(
     with np.errstate(invalid="ignore"):
         standing = (height > np.float32(settings.min_height_m)) & (depth > 0)
     labels_top = np.zeros(depth.shape, dtype=np.int32)
-    row_any = np.flatnonzero(standing.any(axis=1))
-    if len(row_any) == 0:
+    crop = _crop(standing)
+    if crop is None:
         return [], height, labels_top
-    col_any = np.flatnonzero(standing.any(axis=0))
-    r0, r1 = int(row_any[0]), int(row_any[-1]) + 1
-    c0, c1 = int(col_any[0]), int(col_any[-1]) + 1
-    # Work on the rows and columns that hold standing pixels, one pixel wider for the steps.
-    r0, c0 = max(r0 - 1, 0), max(c0 - 1, 0)
-    r1, c1 = min(r1 + 1, rows_n), min(c1 + 1, cols_n)
-    crop = (slice(r0, r1), slice(c0, c1))
-    h = height[crop]
-    d = depth[crop]
-    sigma = support.sigma_at(d)
-    stand = standing[crop] & (h > 4.0 * sigma)
+    r0, c0 = crop[0].start, crop[1].start
+    pad = ((PAD, PAD), (PAD, PAD))
+    h = np.pad(height[crop], pad, constant_values=np.nan)
+    d = np.pad(depth[crop], pad, constant_values=np.nan)
+    width_p = h.shape[1]
+    # Noise grows as distance squared from the support's figure at its distance; while it
+    # stays small everywhere the thresholds are single figures (no noise picture at all).
+    noise_k = np.float32(support.sigma_m / support.distance_m**2)
+    far = float(np.nanmax(d))
+    if 4.0 * max(float(noise_k) * far * far, SIGMA_FLOOR_M) <= min(
+        settings.min_height_m, segment.STEP_FLOOR_M
+    ):
+        stand = np.pad(standing[crop], pad)
+        step: Float32Array | np.float32 = np.float32(segment.STEP_FLOOR_M)
+    else:
+        with np.errstate(invalid="ignore"):
+            sigma4 = np.maximum(d * d * noise_k, np.float32(SIGMA_FLOOR_M)) * np.float32(4.0)
+            stand = h > np.maximum(sigma4, np.float32(settings.min_height_m))
+        step = np.maximum(sigma4, np.float32(segment.STEP_FLOOR_M))
     if settings.max_height_m is not None:
-        stand &= h < np.float32(settings.max_height_m)
-    step = np.maximum(np.float32(4.0) * sigma, np.float32(segment.STEP_FLOOR_M))
+        with np.errstate(invalid="ignore"):
+            stand &= h < np.float32(settings.max_height_m)
     cut = segment.breaks(h, step)
     if colour is not None:
-        cut |= segment.colour_breaks(colour[crop], settings.colour_step)
-    labels, count, slices = segment.pieces(stand, cut)
+        cut |= np.pad(segment.colour_breaks(colour[crop], settings.colour_step), pad)
+    labels, count = ndimage.label(stand & ~cut)
     if count == 0:
         return [], height, labels_top
-    across, down = lens.rays(cols_n, rows_n)
-    area_scale = 1.0 / (lens.fx * lens.fy)
-    # Per piece, the summed footprint area (d^2 / (fx fy |slope|)) decides which are big enough.
-    flat_labels = labels.ravel()
-    idx = np.flatnonzero(flat_labels)
-    d_l = d.ravel()[idx]
-    pixel_area = d_l * d_l * np.float32(area_scale) / np.abs(slope[crop].ravel()[idx])
-    areas = np.bincount(flat_labels[idx], weights=pixel_area, minlength=count + 1)
-    plateaus: list[_Plateau] = []
-    lab_top = labels_top[crop]
-    # Small pieces (a carton's darker rim cut off by a colour edge, a clump) may be taken over
-    # by the large top beside them at the same height; large pieces go first.
-    fragment = areas < settings.min_top_area_m2
-    fragment[0] = True
-    big = np.flatnonzero(areas >= 0.5 * settings.min_top_area_m2)
-    for label in big[np.argsort(-areas[big])]:
-        sl = slices[label - 1]
-        if sl is None:
-            continue
-        plateau = _top(int(label), sl, labels, h, stand, sigma, lab_top, fragment, (r0, c0))
-        if plateau is None:
-            continue
-        _measure(plateau, depth, slope, across, down, lens, support, settings, labels, h, crop)
-        plateaus.append(plateau)
+    h_flat, d_flat, s_flat = h.reshape(-1), d.reshape(-1), np.pad(slope[crop], pad, "edge")
+    s_flat = s_flat.reshape(-1)
+    flat = labels.reshape(-1)
+    idx = np.flatnonzero(flat)
+    lab = flat[idx]
+    dd = d_flat[idx]
+    area_scale = np.float32(1.0 / (lens.fx * lens.fy))
+    areas = np.bincount(
+        lab, weights=dd * dd * area_scale / np.abs(s_flat[idx]), minlength=count + 1
+    )
+    areas[0] = 0.0
+    # Pieces too small to be a top (a carton's rim cut off by a colour edge, a clump, the cut
+    # pixels themselves) may be taken over by the top beside them at the same height.
+    least = 0.5 * settings.min_top_area_m2
+    big = np.flatnonzero(areas >= least)
+    if len(big) == 0:
+        return [], height, labels_top
+    big = big[np.argsort(-areas[big], kind="stable")]
+    tops_n = len(big)
+    lut = np.zeros(count + 1, dtype=np.int32)
+    lut[big] = np.arange(1, tops_n + 1, dtype=np.int32)
+    compact = lut[lab]
+    mine = compact > 0
+    p_idx, p_top = idx[mine], compact[mine] - 1
+    p_h, p_d = h_flat[p_idx], dd[mine]
+    counts = np.bincount(p_top, minlength=tops_n)
+    mean_d = np.bincount(p_top, weights=p_d, minlength=tops_n) / counts
+    tol = np.maximum(
+        3.0 * np.maximum(noise_k * mean_d * mean_d, SIGMA_FLOOR_M), TOP_TOLERANCE_FLOOR_M
+    )
+    level = _levels(p_h, p_top, tops_n, tol)
+    on_level = np.abs(p_h - level[p_top]) < tol[p_top]
+    top_lab = np.zeros(h.shape, dtype=np.int32)
+    top_flat = top_lab.reshape(-1)
+    top_flat[p_idx[on_level]] = p_top[on_level] + 1
+    small = np.zeros(count + 1, dtype=bool)
+    small[1:] = areas[1:] < least
+    candidates = np.concatenate([np.flatnonzero(stand.reshape(-1) & (flat == 0)), idx[small[lab]]])
+    _grow(top_flat, candidates, h_flat, level, tol, width_p)
+    tops = _Tops.gather(top_lab, tops_n, PAD, (r0, c0))
+    labels_top[crop] = top_lab[PAD:-PAD, PAD:-PAD]
+    plateaus = _measure_all(
+        tops,
+        top_flat,
+        h_flat,
+        d_flat,
+        s_flat,
+        level,
+        tol,
+        p_idx,
+        p_top,
+        p_h,
+        lens,
+        support,
+        settings,
+        depth.shape,
+    )
     return plateaus, height, labels_top
 
 
-def _top(
-    label: int,
-    sl: tuple[slice, slice],
-    labels: npt.NDArray[np.int32],
-    h: Float32Array,
-    stand: BoolArray,
-    sigma: Float32Array,
-    lab_top: npt.NDArray[np.int32],
-    fragment: BoolArray,
-    place: tuple[int, int],
-) -> _Plateau | None:
-    """The flat top of one piece: pixels near its highest common height, grown into cuts."""
-    pad = GROW_PX
-    rows, cols = labels.shape
-    a0, a1 = max(sl[0].start - pad, 0), min(sl[0].stop + pad, rows)
-    b0, b1 = max(sl[1].start - pad, 0), min(sl[1].stop + pad, cols)
-    win = (slice(a0, a1), slice(b0, b1))
-    mine = labels[win] == label
-    hh = h[win]
-    values = hh[mine]
-    sig = float(np.median(sigma[win][mine]))
-    tol = max(3.0 * sig, TOP_TOLERANCE_FLOOR_M)
-    ref = float(np.quantile(values, 0.9))
-    near = np.abs(values - ref) < tol
-    top_height = float(np.median(values[near]))
-    with np.errstate(invalid="ignore"):
-        level = np.abs(hh - np.float32(top_height)) < np.float32(tol)
-    top = mine & level
-    free = stand[win] & level & (fragment[labels[win]] | mine) & (lab_top[win] == 0)
-    top = ndimage.binary_dilation(top, CROSS, iterations=GROW_PX, mask=free | top)
-    # The largest connected part is the top; noise may leave a few specks apart from it.
-    parts, n_parts = ndimage.label(top)
-    if n_parts > 1:
-        sizes = np.bincount(parts.ravel())
-        sizes[0] = 0
-        top = parts == int(sizes.argmax())
-    r, c = np.nonzero(top)
-    if len(r) < 6:
-        return None
-    lab_top[win][top] = label
-    r0, c0 = place
-    return _Plateau(label, top_height, tol, r + a0 + r0, c + b0 + c0, window=win)
+def _levels(
+    values: Float32Array, which: npt.NDArray[np.int32], count: int, tol: Float64Array
+) -> Float64Array:
+    """Per piece, its top's height: the most common height (the most readings within the
+    tolerance), then the mean of the readings within the tolerance of it, twice."""
+    bin_m = max(float(tol.min()) / 3.0, 1e-4)
+    low = float(values.min())
+    bins = int((float(values.max()) - low) / bin_m) + 2
+    if bins * count > 4_000_000:
+        bin_m *= bins * count / 4_000_000
+        bins = int((float(values.max()) - low) / bin_m) + 2
+    at = ((values - low) / bin_m).astype(np.intp)
+    hist = np.bincount(which * bins + at, minlength=count * bins).reshape(count, bins)
+    cumulative = np.zeros((count, bins + 1))
+    np.cumsum(hist, axis=1, out=cumulative[:, 1:])
+    reach = np.ceil(tol / bin_m).astype(np.intp)[:, np.newaxis]
+    columns = np.arange(bins)[np.newaxis, :]
+    upper = np.minimum(columns + reach + 1, bins)
+    lower = np.maximum(columns - reach, 0)
+    window = np.take_along_axis(cumulative, upper, 1) - np.take_along_axis(cumulative, lower, 1)
+    # The mean of the readings in the fullest window, then within the tolerance of it.
+    peak = window.argmax(axis=1)
+    near = np.abs(at - peak[which]) <= reach[which, 0]
+    total = np.bincount(which[near], weights=values[near], minlength=count)
+    level = total / np.maximum(np.bincount(which[near], minlength=count), 1)
+    for _ in range(2):
+        near = np.abs(values - level[which]) < tol[which]
+        total = np.bincount(which[near], weights=values[near], minlength=count)
+        number = np.bincount(which[near], minlength=count)
+        level = np.where(number > 0, total / np.maximum(number, 1), level)
+    result: Float64Array = level
+    return result
 
 
-def _measure(
-    p: _Plateau,
-    depth: Float32Array,
-    slope: Float32Array,
-    across: Float64Array,
-    down: Float64Array,
+def _grow(
+    top_flat: npt.NDArray[np.int32],
+    candidates: npt.NDArray[np.intp],
+    h_flat: Float32Array,
+    level: Float64Array,
+    tol: Float64Array,
+    width: int,
+) -> None:
+    """Tops grow back into cut pixels and small pieces at their height, GROW_PX pixels; where
+    two tops reach one pixel the larger (lower index) takes it."""
+    heights = h_flat[candidates]
+    none = np.int32(np.iinfo(np.int32).max)
+    for _ in range(GROW_PX):
+        if len(candidates) == 0:
+            return
+        best = np.full(len(candidates), none, dtype=np.int32)
+        for offset in (1, -1, width, -width):
+            seen = top_flat[candidates + offset]
+            np.minimum(best, np.where(seen > 0, seen, none), out=best)
+        take = np.flatnonzero(best < none)
+        which = best[take] - 1
+        fits = np.abs(heights[take] - level[which]) < tol[which]
+        take, which = take[fits], which[fits]
+        top_flat[candidates[take]] = which + 1
+        keep = np.ones(len(candidates), dtype=bool)
+        keep[take] = False
+        candidates, heights = candidates[keep], heights[keep]
+
+
+@dataclass
+class _Tops:
+    """Every top's pixels in the padded crop, grouped by top (row-major within a top)."""
+
+    flat: npt.NDArray[np.intp]
+    top: npt.NDArray[np.int32]
+    starts: npt.NDArray[np.intp]
+    counts: npt.NDArray[np.intp]
+    width: int
+    rows: npt.NDArray[np.intp]
+    cols: npt.NDArray[np.intp]
+    row_fill: Float64Array
+    col_fill: Float64Array
+    shift: tuple[int, int]
+    """Picture row and column of the padded crop's first pixel."""
+
+    @classmethod
+    def gather(
+        cls, top_lab: npt.NDArray[np.int32], count: int, pad: int, origin: tuple[int, int]
+    ) -> _Tops:
+        width = top_lab.shape[1]
+        flat, top = _grouped(top_lab.reshape(-1), count)
+        counts = np.bincount(top, minlength=count)
+        starts = np.concatenate(([0], np.cumsum(counts)[:-1]))
+        rows, cols = np.divmod(flat, width)
+        row_fill = _spans(top, rows, cols, count)
+        flat_t, top_t = _grouped(top_lab.T.reshape(-1), count)
+        cols_t, rows_t = np.divmod(flat_t, top_lab.shape[0])
+        col_fill = _spans(top_t, cols_t, rows_t, count)
+        shift = (origin[0] - pad, origin[1] - pad)
+        return cls(
+            flat,
+            top,
+            starts,
+            counts,
+            width,
+            rows + shift[0],
+            cols + shift[1],
+            row_fill,
+            col_fill,
+            shift,
+        )
+
+
+def _grouped(
+    labels: npt.NDArray[np.int32], count: int
+) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.int32]]:
+    """Flat indices of labelled pixels, grouped by label, in picture order within a group."""
+    flat = np.flatnonzero(labels)
+    top = labels[flat] - 1
+    kind = np.int16 if count < 32_000 else np.int32
+    order = np.argsort(top.astype(kind), kind="stable")
+    return flat[order], top[order]
+
+
+def _spans(
+    top: npt.NDArray[np.int32], lines: npt.NDArray[np.intp], along: npt.NDArray[np.intp], count: int
+) -> Float64Array:
+    """Per top, the pixels from the first to the last of each line (row or column), summed:
+    the top's area with the holes in it (noise, a box standing on it) filled."""
+    key = top.astype(np.int64) * (int(lines.max()) + 1) + lines
+    first = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+    last = np.r_[first[1:] - 1, len(key) - 1]
+    result: Float64Array = np.bincount(
+        top[first], weights=(along[last] - along[first] + 1).astype(np.float64), minlength=count
+    )
+    return result
+
+
+def _measure_all(
+    tops: _Tops,
+    top_flat: npt.NDArray[np.int32],
+    h_flat: Float32Array,
+    d_flat: Float32Array,
+    s_flat: Float32Array,
+    level: Float64Array,
+    tol: Float64Array,
+    p_idx: npt.NDArray[np.intp],
+    p_top: npt.NDArray[np.int32],
+    p_h: Float32Array,
     lens: Intrinsics,
     support: Support,
     settings: FinderSettings,
-    labels: npt.NDArray[np.int32],
-    h: Float32Array,
-    crop: tuple[slice, slice],
-) -> None:
-    """Fit the top's plane and rectangle and decide whether it is a box."""
-    rows_n, cols_n = depth.shape
-    d = depth[p.rows, p.cols].astype(np.float64)
-    pts = np.stack([across[p.cols] * d, down[p.rows] * d, d], axis=1)
-    pixel_area = d * d / (lens.fx * lens.fy * np.abs(slope[p.rows, p.cols].astype(np.float64)))
-    area = float(pixel_area.sum())
-    if area < settings.min_top_area_m2:
-        return
-    centre = pts.mean(axis=0)
-    values, vectors = np.linalg.eigh(np.cov((pts - centre).T))
-    normal_c = vectors[:, 0] * (1.0 if vectors[2, 0] < 0 else -1.0)
-    rms = math.sqrt(max(float(values[0]), 0.0))
-    p.normal_c = normal_c
-    n = np.asarray(support.normal_camera)
-    # Outline: top pixels with a 4-neighbour off the top. Hidden: that neighbour is nearer.
-    r0 = int(p.rows.min())
-    c0 = int(p.cols.min())
-    mask = np.zeros((int(p.rows.max()) - r0 + 3, int(p.cols.max()) - c0 + 3), dtype=bool)
-    mask[p.rows - r0 + 1, p.cols - c0 + 1] = True
-    # Holes inside a top (noise, or a box standing on it) are not its outline, and a box
-    # standing on it hides part of its area.
-    filled = ndimage.binary_fill_holes(mask)
-    inner = ndimage.binary_erosion(filled, CROSS)
-    area += float(np.count_nonzero(filled & ~mask)) * float(np.median(pixel_area))
-    outline = mask[p.rows - r0 + 1, p.cols - c0 + 1] & ~inner[p.rows - r0 + 1, p.cols - c0 + 1]
-    hidden = np.zeros(len(d), dtype=bool)
-    cut_off = False
-    occluder_m = max(3.0 * p.tolerance_m, 0.005)
-    for dr, dc in ((0, 1), (0, -1), (1, 0), (-1, 0)):
-        nr, nc = p.rows + dr, p.cols + dc
-        inside = (nr >= 0) & (nr < rows_n) & (nc >= 0) & (nc < cols_n)
-        cut_off |= bool((~inside).any())
-        nr, nc = np.clip(nr, 0, rows_n - 1), np.clip(nc, 0, cols_n - 1)
-        off_top = ~mask[nr - r0 + 1, nc - c0 + 1]
-        with np.errstate(invalid="ignore"):
-            nearer = depth[nr, nc] < d - occluder_m
-        hidden |= outline & inside & off_top & nearer
-    if cut_off and not settings.keep_cut_off:
-        return
+    shape: tuple[int, int],
+) -> list[_Plateau]:
+    """Every top's plane, outline, rectangle and score; which of them are boxes."""
+    rows_n, cols_n = shape
+    count = len(level)
+    top = tops.top
+    across, down = lens.rays(cols_n, rows_n)
     basis = _plane_basis(support, None)
-    flat = np.stack([pts @ basis[0], pts @ basis[1]], axis=1)
-    rect = fit_rectangle(flat, outline, hidden, pixel_area, area)
-    if rect is None or rect.length_m <= 0 or rect.width_m <= 0:
-        return
-    p.rect = rect
-    # The fill is taken against the extreme pixels (plus a footprint), not the fitted sides: a
-    # disc's sides fitted by medians would hug it.
-    footprint = math.sqrt(float(np.median(pixel_area)))
-    ax = np.asarray(rect.axis)
-    perp = np.array([-ax[1], ax[0]])
-    rect_area = (np.ptp(flat @ ax) + footprint) * (np.ptp(flat @ perp) + footprint)
-    fill = min(area / rect_area, 1.0)
-    flatness = max(0.0, 1.0 - max(rms - 1.5 * p.tolerance_m / 3.0, 0.0) / p.tolerance_m)
-    p.score = fill * flatness
-    tilt = math.degrees(math.acos(min(1.0, abs(float(normal_c @ n)))))
-    if tilt > settings.max_top_tilt_deg or p.score < settings.min_score:
-        return
-    # Curved tops widen when the tolerance is loosened; a box's sides drop straight down.
-    win_r, win_c = p.window
-    with np.errstate(invalid="ignore"):
-        loose = (labels[p.window] == p.label) & (
-            h[p.window] > np.float32(p.height_m - 4.0 * p.tolerance_m)
+    d = d_flat[tops.flat]
+    pixel_area = d * d
+    pixel_area /= np.abs(s_flat[tops.flat])
+    pixel_area *= np.float32(1.0 / (lens.fx * lens.fy))
+    n = np.maximum(tops.counts, 1).astype(np.float64)
+    area = np.bincount(top, weights=pixel_area, minlength=count)
+    mean_area = area / n
+    # The top's plane from its moments, all tops at once, on a sample of at most ~16k pixels
+    # (every k-th of the grouped pixels: each top keeps its share).
+    k = max(1, len(top) // 16_000)
+    sample = slice(k // 2, None, k)
+    ds = d[sample].astype(np.float64)
+    xyz = (across[tops.cols[sample]] * ds, down[tops.rows[sample]] * ds, ds)
+    st = top[sample]
+    ns = np.maximum(np.bincount(st, minlength=count), 1).astype(np.float64)
+    centred = []
+    for row in basis:
+        values = row[0] * xyz[0] + row[1] * xyz[1] + row[2] * xyz[2]
+        mean = np.bincount(st, weights=values, minlength=count) / ns
+        centred.append(values - mean[st])
+    moments = np.empty((count, 3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            m = np.bincount(st, weights=centred[i] * centred[j], minlength=count) / ns
+            moments[:, i, j] = m
+            moments[:, j, i] = m
+    values_e, vectors = np.linalg.eigh(moments)
+    rms = np.sqrt(np.maximum(values_e[:, 0], 0.0))
+    tilt = np.degrees(np.arccos(np.minimum(np.abs(vectors[:, 2, 0]), 1.0)))
+    # Outline: top pixels with a 4-neighbour off the top. Hidden: within two pixels past it the
+    # surface rises above the top (something stands on it, or is in front of it).
+    label_at = top_flat
+    own = top + 1
+    outline = np.zeros(len(top), dtype=bool)
+    offsets = (1, -1, tops.width, -tops.width)
+    for offset in offsets:
+        outline |= label_at[tops.flat + offset] != own
+    edge = np.flatnonzero(outline)
+    e_flat, e_top = tops.flat[edge], top[edge]
+    # The outline's points in the support plane (the rectangle needs no others).
+    de = d[edge].astype(np.float64)
+    xe, ye = across[tops.cols[edge]] * de, down[tops.rows[edge]] * de
+    a = basis[0, 0] * xe + basis[0, 1] * ye + basis[0, 2] * de
+    b = basis[1, 0] * xe + basis[1, 1] * ye + basis[1, 2] * de
+    # Each row's first and last outline pixel: their hull is the top's hull.
+    row_key = e_top.astype(np.int64) * (rows_n + 1) + tops.rows[edge]
+    change = np.flatnonzero(row_key[1:] != row_key[:-1])
+    extreme = np.zeros(len(edge), dtype=bool)
+    extreme[0] = extreme[-1] = True
+    extreme[change] = True
+    extreme[change + 1] = True
+    e_level = level[e_top] + np.maximum(3.0 * tol[e_top], 0.005)
+    hidden = np.zeros(len(edge), dtype=bool)
+    for offset in offsets:
+        off = label_at[e_flat + offset] != e_top + 1
+        rise = np.fmax(h_flat[e_flat + offset], h_flat[e_flat + 2 * offset])
+        with np.errstate(invalid="ignore"):
+            hidden |= off & (rise > e_level)
+    border = (tops.rows == 0) | (tops.rows == rows_n - 1) | (tops.cols == 0)
+    border |= tops.cols == cols_n - 1
+    cut_off = np.bincount(top[border], minlength=count) > 0
+    filled = np.minimum(tops.row_fill, tops.col_fill)
+    whole_area = area + np.maximum(filled - tops.counts, 0) * mean_area
+    eligible = (tops.counts >= 6) & (whole_area >= settings.min_top_area_m2)
+    if not settings.keep_cut_off:
+        eligible &= ~cut_off
+    footprint = np.sqrt(mean_area)
+    chosen = eligible[e_top]
+    rects = fit_rectangles(
+        np.stack([a[chosen], b[chosen]], axis=1),
+        e_top[chosen],
+        hidden[chosen],
+        extreme[chosen],
+        footprint,
+        whole_area,
+    )
+    edge_starts = np.searchsorted(e_top, np.arange(count))
+    edge_stops = np.searchsorted(e_top, np.arange(count), side="right")
+    loose = _loose_groups(p_idx, p_top, p_h, level, tol, count)
+    plateaus: list[_Plateau] = []
+    for t in range(count):
+        if tops.counts[t] < 6:
+            continue
+        p = _Plateau(
+            t,
+            float(level[t]),
+            float(tol[t]),
+            int(tops.counts[t]),
+            float(footprint[t]),
+            float(area[t]),
         )
-    lr, lc = np.nonzero(loose)
-    lr = lr + win_r.start + crop[0].start
-    lc = lc + win_c.start + crop[1].start
-    if len(lr) > len(d):
-        dl = depth[lr, lc].astype(np.float64)
-        lp = np.stack([across[lc] * dl, down[lr] * dl, dl], axis=1)
-        loose_flat = np.stack([lp @ basis[0], lp @ basis[1]], axis=1)
-        growth = (_spread(loose_flat @ ax) * _spread(loose_flat @ perp)) / max(
-            _spread(flat @ ax) * _spread(flat @ perp), 1e-12
-        )
-        if growth > settings.max_curvature_growth:
-            return
-    p.is_box = True
+        plateaus.append(p)
+        rect = rects[t]
+        if not eligible[t] or rect is None:
+            continue
+        p.rect = rect
+        # The fill is taken against the extreme pixels (plus a footprint), not the fitted
+        # sides: a disc's sides fitted by medians would hug it.
+        ax = np.asarray(rect.axis)
+        perp = np.array([-ax[1], ax[0]])
+        part = slice(int(edge_starts[t]), int(edge_stops[t]))
+        points = np.stack([a[part], b[part]], axis=1)
+        rect_area = (np.ptp(points @ ax) + footprint[t]) * (np.ptp(points @ perp) + footprint[t])
+        fill = min(float(whole_area[t]) / rect_area, 1.0)
+        flatness = max(0.0, 1.0 - max(rms[t] - 0.5 * tol[t], 0.0) / tol[t])
+        p.score = fill * flatness
+        if tilt[t] > settings.max_top_tilt_deg or p.score < settings.min_score:
+            continue
+        # Curved tops widen when the tolerance is loosened; a box's sides drop straight down.
+        wide = loose[t]
+        if len(wide) > tops.counts[t] and _growth(wide, tops, d_flat, lens, basis, points, ax) > (
+            settings.max_curvature_growth
+        ):
+            continue
+        p.is_box = True
+    return plateaus
+
+
+def _loose_groups(
+    p_idx: npt.NDArray[np.intp],
+    p_top: npt.NDArray[np.int32],
+    p_h: Float32Array,
+    level: Float64Array,
+    tol: Float64Array,
+    count: int,
+) -> list[npt.NDArray[np.intp]]:
+    """Per top, its piece's pixels within four tolerances below its height (the curvature
+    test's footprint)."""
+    keep = p_h > level[p_top] - 4.0 * tol[p_top]
+    which = p_top[keep]
+    order = np.argsort(which.astype(np.int16 if count < 32_000 else np.int32), kind="stable")
+    flat = p_idx[keep][order]
+    stops = np.cumsum(np.bincount(which, minlength=count))
+    return np.split(flat, stops[:-1])
+
+
+def _growth(
+    wide: npt.NDArray[np.intp],
+    tops: _Tops,
+    d_flat: Float32Array,
+    lens: Intrinsics,
+    basis: Float64Array,
+    outline: Float64Array,
+    axis: Float64Array,
+) -> float:
+    """How much a top's extent (along and across its axis) grows with the loose tolerance."""
+    rows, cols = np.divmod(wide, tops.width)
+    d = d_flat[wide].astype(np.float64)
+    x = (cols + tops.shift[1] - lens.cx) / lens.fx * d
+    y = (rows + tops.shift[0] - lens.cy) / lens.fy * d
+    perp = np.array([-axis[1], axis[0]])
+    flat_a = basis[0, 0] * x + basis[0, 1] * y + basis[0, 2] * d
+    flat_b = basis[1, 0] * x + basis[1, 1] * y + basis[1, 2] * d
+    along = flat_a * axis[0] + flat_b * axis[1]
+    side = flat_a * perp[0] + flat_b * perp[1]
+    before = max(float(np.ptp(outline @ axis)) * float(np.ptp(outline @ perp)), 1e-12)
+    return _spread(along) * _spread(side) / before
 
 
 def _spread(values: Float64Array) -> float:
-    low, high = np.percentile(values, [1.0, 99.0])
+    """From the 1st to the 99th percentile."""
+    k = len(values) // 100
+    low, high = np.partition(values, (k, len(values) - 1 - k))[[k, len(values) - 1 - k]]
     return float(high - low)
+
+
+PROBE_FRACTIONS = np.linspace(-0.4, 0.4, 5)
+
+
+def _probes(box: _Plateau) -> Float64Array:
+    """Points in the support plane just outside each side of a box's rectangle, 5 a side."""
+    assert box.rect is not None
+    rect = box.rect
+    ax = np.asarray(rect.axis)
+    perp = np.array([-ax[1], ax[0]])
+    mid = np.asarray(rect.middle)
+    reach = max(0.008, 3.0 * box.footprint_m)
+    points = []
+    for direction, half, along, half_along in (
+        (ax, rect.length_m / 2, perp, rect.width_m / 2),
+        (-ax, rect.length_m / 2, perp, rect.width_m / 2),
+        (perp, rect.width_m / 2, ax, rect.length_m / 2),
+        (-perp, rect.width_m / 2, ax, rect.length_m / 2),
+    ):
+        for f in PROBE_FRACTIONS:
+            points.append(mid + direction * (half + reach) + along * (2 * f * half_along))
+    return np.asarray(points)
+
+
+def _reaches_under(lower: _Plateau, upper: _Plateau, slack: float = 0.01) -> bool:
+    """Whether the lower top may go on under the upper box: it is no box (its extent is
+    unknown), its rectangle holds the upper's middle, or the upper's middle lies past one of
+    its hidden sides (a pallet's top seen as a strip in front of the cartons on it)."""
+    if not lower.is_box or lower.rect is None:
+        return True
+    assert upper.rect is not None
+    rect = lower.rect
+    ax = np.asarray(rect.axis)
+    perp = np.array([-ax[1], ax[0]])
+    rel = np.asarray(upper.rect.middle) - np.asarray(rect.middle)
+    hl, hw = rect.length_m / 2, rect.width_m / 2
+    if abs(rel @ ax) <= hl + slack and abs(rel @ perp) <= hw + slack:
+        return True
+    for normal in rect.hidden_normals:
+        out = np.asarray(normal)
+        side = np.array([-out[1], out[0]])
+        half_out, half_side = (hl, hw) if abs(out @ ax) > 0.7 else (hw, hl)
+        if rel @ out >= half_out - slack and abs(rel @ side) <= half_side + slack:
+            return True
+    return False
 
 
 def _bases(
@@ -412,102 +699,114 @@ def _bases(
     labels_top: npt.NDArray[np.int32],
     lens: Intrinsics,
     support: Support,
-    basis: Float64Array,
     settings: FinderSettings,
 ) -> None:
     """What each box stands on (see the module docstring, step 6)."""
+    if not boxes:
+        return
     rows_n, cols_n = height_m.shape
-    n = basis[2]
-    camera_basis = _plane_basis(support, None)
-    levels = sorted({0.0, *(p.height_m for p in plateaus)})
-    box_levels = {round(b.height_m, 4) for b in boxes}
-    undecided: list[_Plateau] = []
-    seen_other: dict[int, float] = {}
-    for box in boxes:
-        assert box.rect is not None
-        rect = box.rect
-        ax = np.asarray(rect.axis)
-        perp = np.array([-ax[1], ax[0]])
-        mid = np.asarray(rect.middle)
-        reach = max(0.008, 3.0 * math.sqrt(rect.area_m2 / max(len(box.rows), 1)))
-        fractions = np.linspace(-0.4, 0.4, 5)
-        samples = []
-        for direction, half, along, half_along in (
-            (ax, rect.length_m / 2, perp, rect.width_m / 2),
-            (-ax, rect.length_m / 2, perp, rect.width_m / 2),
-            (perp, rect.width_m / 2, ax, rect.length_m / 2),
-            (-perp, rect.width_m / 2, ax, rect.length_m / 2),
-        ):
-            for f in fractions:
-                samples.append(mid + direction * (half + reach) + along * (2 * f * half_along))
-        flat = np.asarray(samples)
-        best: float | None = None
-        other_best: float | None = None
-        for level in levels:
-            if level > box.height_m - settings.min_height_m:
-                break
-            # Camera-frame points at this level: a e1 + b e2 + (level - offset) n.
-            pts = (
-                flat[:, :1] * camera_basis[0]
-                + flat[:, 1:] * camera_basis[1]
-                + (level - support.offset_camera_m) * n
-            )
-            z = pts[:, 2]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                u = np.rint(lens.fx * pts[:, 0] / z + lens.cx)
-                v = np.rint(lens.fy * pts[:, 1] / z + lens.cy)
-            inside = (z > 0) & (u >= 0) & (u < cols_n) & (v >= 0) & (v < rows_n)
-            ui, vi = u[inside].astype(np.intp), v[inside].astype(np.intp)
-            seen_h = height_m[vi, ui]
-            known = np.isfinite(seen_h) & (labels_top[vi, ui] != box.label)
-            if known.sum() < 3:
-                continue
-            tol = max(3.0 * box.tolerance_m, 0.004)
-            share = float((np.abs(seen_h[known] - level) < tol).mean())
-            if share >= 0.4:
-                best = level
-            if share >= 0.1 and round(level, 4) not in box_levels and level > 0:
-                other_best = level
-        if best is not None:
-            box.base_m = best
-        else:
-            undecided.append(box)
-            if other_best is not None:
-                seen_other[box.label] = other_best
-    # A box hemmed in by touching boxes stands where they stand.
-    decided = [b for b in boxes if b not in undecided]
-    for _ in range(3):
-        still = []
-        for box in undecided:
-            assert box.rect is not None
-            neighbour = next(
-                (
-                    o
-                    for o in decided
-                    if o.base_m < box.height_m - settings.min_height_m and _touch(box, o)
-                ),
-                None,
-            )
-            if neighbour is None:
-                still.append(box)
-            else:
-                box.base_m = neighbour.base_m
-                decided.append(box)
-        if len(still) == len(undecided):
-            break
-        undecided = still
-    for box in undecided:
-        box.base_m = seen_other.get(box.label, 0.0)
-    for box in boxes:
-        if box.base_m <= 0.0:
+    cam = _plane_basis(support, None)
+    levels = [None, *plateaus]
+    level_h = np.array([0.0] + [p.height_m for p in plateaus])
+    support_tol = 3.0 * float(support.sigma_at(support.distance_m))
+    level_tol = np.maximum(np.array([support_tol] + [p.tolerance_m for p in plateaus]), 0.004)
+    level_label = np.array([-1] + [p.label for p in plateaus])
+    probes = np.stack([_probes(box) for box in boxes])  # boxes x probes x 2
+    # Camera-frame probe points at every level: a e1 + b e2 + (level - offset) n.
+    pts = (
+        probes[np.newaxis, :, :, :1] * cam[0]
+        + probes[np.newaxis, :, :, 1:] * cam[1]
+        + (level_h[:, np.newaxis, np.newaxis, np.newaxis] - support.offset_camera_m) * cam[2]
+    )
+    z = pts[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.rint(lens.fx * pts[..., 0] / z + lens.cx)
+        v = np.rint(lens.fy * pts[..., 1] / z + lens.cy)
+        inside = (z > 0) & (u >= 0) & (u < cols_n) & (v >= 0) & (v < rows_n)
+    ui = np.where(inside, u, 0).astype(np.intp)
+    vi = np.where(inside, v, 0).astype(np.intp)
+    seen_h = np.where(inside, height_m[vi, ui], np.nan)
+    seen_label = np.where(inside, labels_top[vi, ui] - 1, -2)
+    own = np.array([b.label for b in boxes])[np.newaxis, :, np.newaxis]
+    lh = level_h[:, np.newaxis, np.newaxis]
+    lt = level_tol[:, np.newaxis, np.newaxis]
+    ll = level_label[:, np.newaxis, np.newaxis]
+    with np.errstate(invalid="ignore"):
+        match = (np.abs(seen_h - lh) < lt) & ((seen_label == -1) | (seen_label == ll))
+        lower = (seen_h < lh - lt) & (seen_label != own)
+    matches, lowers = match.sum(axis=2), lower.sum(axis=2)
+    box_h = np.array([b.height_m for b in boxes])
+    allowed = level_h[:, np.newaxis] < box_h[np.newaxis, :] - settings.min_height_m
+    for j, level in enumerate(levels):
+        if level is None:
             continue
-        under = [
-            o
-            for o in boxes
-            if o is not box and abs(o.height_m - box.base_m) < 1e-9 and _contains(o, box)
-        ]
-        if under:
-            box.on_plateau = under[0].label
+        for i, box in enumerate(boxes):
+            if allowed[j, i]:
+                allowed[j, i] = _reaches_under(level, box)
+    # A level counts when it is seen on at least two probes and hardly anything lower is.
+    seen_ok = allowed & (matches >= 2) & (matches >= 0.75 * (matches + lowers))
+    base: dict[int, int] = {}
+    for i in range(len(boxes)):
+        ok = np.flatnonzero(seen_ok[:, i])
+        if len(ok):
+            base[i] = int(ok[np.argmax(level_h[ok])])
+    # A box hemmed in by touching boxes stands where most of them stand.
+    for _ in range(3):
+        changed = False
+        for i, box in enumerate(boxes):
+            if i in base:
+                continue
+            votes = [
+                base[k]
+                for k, other in enumerate(boxes)
+                if k in base and allowed[base[k], i] and _touch(box, other)
+            ]
+            if votes:
+                base[i] = max(set(votes), key=lambda j: (votes.count(j), level_h[j]))
+                changed = True
+        if not changed:
+            break
+    platforms = {
+        j
+        for i, j in base.items()
+        if levels[j] is not None and _is_platform(levels[j], boxes[i])  # type: ignore[arg-type]
+    }
+    for i, box in enumerate(boxes):
+        if i not in base:
+            # Still undecided: the highest platform it stands over, else the support.
+            under = [j for j in platforms if allowed[j, i]]
+            base[i] = max(under, key=lambda j: level_h[j]) if under else 0
+        box.base_m = float(level_h[base[i]])
+        level = levels[base[i]]
+        if level is not None and base[i] in platforms:
+            level.platform = True
+        elif level is not None and level.is_box:
+            box.on_plateau = level.label
+
+
+def _is_platform(lower: _Plateau, upper: _Plateau) -> bool:
+    """A box's base that is no box of its own: a top that goes on under the box past a hidden
+    side, or one mostly covered by what stands on it."""
+    if not lower.is_box or lower.rect is None:
+        return True
+    rect = lower.rect
+    if lower.visible_m2 < 0.5 * rect.length_m * rect.width_m:
+        return True
+    return (
+        rect.hidden_sides > 0
+        and _reaches_under(lower, upper, slack=-0.0)
+        and not (_inside(lower, upper))
+    )
+
+
+def _inside(lower: _Plateau, upper: _Plateau) -> bool:
+    assert lower.rect is not None and upper.rect is not None
+    ax = np.asarray(lower.rect.axis)
+    rel = np.asarray(upper.rect.middle) - np.asarray(lower.rect.middle)
+    return bool(
+        abs(rel @ ax) <= lower.rect.length_m / 2
+        and abs(rel @ np.array([-ax[1], ax[0]])) <= lower.rect.width_m / 2
+    )
 
 
 def _touch(a: _Plateau, b: _Plateau) -> bool:
@@ -522,17 +821,6 @@ def _touch(a: _Plateau, b: _Plateau) -> bool:
             if pa.max() + gap < pb.min() or pb.max() + gap < pa.min():
                 return False
     return True
-
-
-def _contains(lower: _Plateau, upper: _Plateau) -> bool:
-    """Whether the upper top's middle is over the lower top's rectangle (1 cm slack)."""
-    assert lower.rect is not None and upper.rect is not None
-    ax = np.asarray(lower.rect.axis)
-    rel = np.asarray(upper.rect.middle) - np.asarray(lower.rect.middle)
-    return bool(
-        abs(rel @ ax) <= lower.rect.length_m / 2 + 0.01
-        and abs(rel @ np.array([-ax[1], ax[0]])) <= lower.rect.width_m / 2 + 0.01
-    )
 
 
 def _report(
@@ -578,7 +866,7 @@ def _report(
         yaw = (yaw + 90.0) % 180.0 - 90.0
         if yaw == -90.0:
             yaw = 90.0
-        quaternion = Rotation.from_matrix(np.stack([x_axis, y_axis, z_axis], axis=1)).as_quat()
+        quaternion = _quaternion(np.stack([x_axis, y_axis, z_axis], axis=1))
         result.append(
             Box(
                 centre=_vec(centre),
@@ -591,7 +879,7 @@ def _report(
                 size=(rect.length_m, rect.width_m, height),
                 yaw_deg=yaw,
                 score=b.score,
-                top_pixels=len(b.rows),
+                top_pixels=b.pixels,
                 top_middle=_vec(top),
                 on=index.get(b.on_plateau) if b.on_plateau is not None else None,
                 hidden_sides=rect.hidden_sides,
@@ -603,6 +891,31 @@ def _report(
         del kept
         result = [replace(r, on=None) for r in result]
     return result
+
+
+def _quaternion(m: Float64Array) -> Float64Array:
+    """x, y, z, w of a rotation matrix (Shepperd's method: the largest of the four first)."""
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    i = int(np.argmax([m[0, 0], m[1, 1], m[2, 2], trace]))
+    if i == 3:
+        w = math.sqrt(1.0 + trace) / 2
+        q = [
+            (m[2, 1] - m[1, 2]) / (4 * w),
+            (m[0, 2] - m[2, 0]) / (4 * w),
+            (m[1, 0] - m[0, 1]) / (4 * w),
+            w,
+        ]
+    else:
+        j, k = (i + 1) % 3, (i + 2) % 3
+        big = math.sqrt(1.0 + m[i, i] - m[j, j] - m[k, k]) / 2
+        q = [0.0, 0.0, 0.0, (m[k, j] - m[j, k]) / (4 * big)]
+        q[i] = big
+        q[j] = (m[j, i] + m[i, j]) / (4 * big)
+        q[k] = (m[k, i] + m[i, k]) / (4 * big)
+    result = np.asarray(q)
+    if result[3] < 0:
+        result = -result
+    return result / np.linalg.norm(result)
 
 
 def _vec(v: Float64Array) -> Vec3:
