@@ -45,7 +45,7 @@ from typing import TextIO
 
 import zenoh
 
-from onebox import bus, settings
+from onebox import bus, memory, settings
 from onebox.errors import RecordingError
 from onebox.recording import COMPRESSIONS, ByteBudgetQueue, RecordingWriter
 
@@ -187,6 +187,7 @@ class Recorder:
                 self.queue.release(sum(len(p) for _, _, p in items))
                 if time.monotonic() - last_flush >= self._flush_interval_s:
                     self.writer.flush()
+                    memory.trim()
                     last_flush = time.monotonic()
                 if stopping and not items:
                     return
@@ -284,6 +285,7 @@ def main(args: argparse.Namespace) -> int:
         raise RecordingError(
             f"{config.out} already exists: delete it, choose another name, or pass --overwrite"
         )
+    memory.bound_heap()  # before Zenoh's threads start: payloads must not fragment the heap
     with bus.open_bus(args) as b:
         writer = RecordingWriter(
             config.out,
