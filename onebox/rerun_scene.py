@@ -370,7 +370,7 @@ class SceneLog:
         depth = pictures.depth_m(message)
         with np.errstate(invalid="ignore"):
             valid = depth[np.isfinite(depth) & (depth > 0)]
-        # Colour the readings this picture has, near bright and far dark, as `onebox pixels`
+        # Colour the readings this picture has, near bright (yellow), far dark, as `onebox pixels`
         # draws them: the range is given far to near.
         near_far = (float(valid.min()), float(valid.max())) if valid.size else (0.05, 3.0)
         if near_far[1] - near_far[0] < 1e-3:
@@ -386,7 +386,7 @@ class SceneLog:
             rr.DepthImage(
                 np.clip(mm, 0, 65535).astype(np.uint16),
                 meter=1000.0,
-                colormap="turbo",
+                colormap="viridis",
                 depth_range=(near_far[1] * 1000.0, near_far[0] * 1000.0),
                 point_fill_ratio=0.5,
             ),

@@ -81,7 +81,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     settings.add(parser, "web_port", 0, "web viewer port on 127.0.0.1; 0: 9090 or any free")
     settings.add(parser, "grpc_port", 0, "Rerun's data port on 127.0.0.1; 0: 9876 or any free")
     settings.add(
-        parser, "memory_limit", "256MiB", "what the web server keeps for late-joining browsers"
+        parser,
+        "memory_limit",
+        "16MiB",
+        "what the web server replays to a browser that joins late (static data is always kept); "
+        "small, so a late page catches up in seconds",
     )
     parser.add_argument(
         "--points", action="store_true", help="also draw camera/points (thinned, once a second)"
