@@ -149,6 +149,57 @@ def bench_shm(count: int, restarts: int) -> None:
         )
 
 
+def bench_hosts(runs: int, down_s: float, loss_s: float) -> None:
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import netlab  # benchmarks/ is a folder of programs, not a package
+
+    reason = netlab.can_run()
+    if reason:
+        print(f"hosts: skipped, {reason}")
+        return
+    print(
+        f"hosts: sim on A, locator on B, subscriber on C; B's link down {down_s:.0f} s, "
+        f"{runs} times"
+    )
+    recovered: list[float] = []
+    gaps: list[float] = []
+    with netlab.Lab(subnet=8) as lab, netlab.pipeline(lab) as probe:
+        for run in range(runs):
+            took, gap = netlab.outage(lab, probe, "b", down_s)
+            gaps.append(gap)
+            if took is not None:
+                recovered.append(took)
+            print(
+                f"  run {run + 1}: first detection at C {took if took is None else round(took, 2)}"
+                f" s after the link returned; longest A -> C depth gap {gap:.2f} s"
+            )
+    print(
+        f"recovered in {len(recovered)} of {runs} runs; first detection after the link "
+        f"returned: median {statistics.median(recovered):.2f} s, worst {max(recovered):.2f} s"
+    )
+    print(f"A -> C depth during B's outages: longest gap {max(gaps):.2f} s (5 Hz: 0.20 s apart)")
+
+    print(
+        f"\nhosts: B's links through a proxy adding 20 ms each way and a 200 ms stall to 5 % "
+        f"of chunks (TCP's retransmission of a lost segment), {loss_s:.0f} s"
+    )
+    with netlab.Lab(subnet=9) as lab:
+        with (
+            netlab.lossy_proxy_process(lab, "a", 7450, 0.020, 0.05) as to_a,
+            netlab.lossy_proxy_process(lab, "b", 7450, 0.020, 0.05) as to_b,
+            netlab.pipeline(lab, via={("b", "a"): to_a, ("c", "b"): to_b}) as probe,
+        ):
+            start = time.monotonic()
+            time.sleep(loss_s)  # the window being measured
+            end = time.monotonic()
+            captures = probe.count("camera/depth/image_raw", start, end)
+            detected = probe.count("detections", start, end)
+    print(
+        f"captures at C {captures}, detections at C {detected}: "
+        f"{100 * detected / max(captures, 1):.1f} % detected"
+    )
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -157,9 +208,15 @@ def main() -> int:
     shm = sub.add_parser("shm", help="shared memory on and off")
     shm.add_argument("--count", type=int, default=200)
     shm.add_argument("--restarts", type=int, default=10)
+    hosts = sub.add_parser("hosts", help="three hosts in network namespaces (root)")
+    hosts.add_argument("--runs", type=int, default=5)
+    hosts.add_argument("--down-s", type=float, default=15.0)
+    hosts.add_argument("--loss-s", type=float, default=60.0)
     args = parser.parse_args()
     if args.what == "shm":
         bench_shm(args.count, args.restarts)
+    else:
+        bench_hosts(args.runs, args.down_s, args.loss_s)
     return 0
 
 

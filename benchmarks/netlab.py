@@ -145,27 +145,19 @@ class Lab:
     def onebox(self, host: str, *argv: str) -> subprocess.Popen[str]:
         return self.run(host, sys.executable, "-m", "services.cli", *argv)
 
-    def start_routers(self, via: dict[str, str] | None = None) -> list[subprocess.Popen[str]]:
-        """A router per host on loopback and its address, connected to the others.
+    def start_routers(
+        self, via: dict[tuple[str, str], str] | None = None
+    ) -> list[subprocess.Popen[str]]:
+        """A router per host on loopback and its address, each connected to the hosts before it.
 
-        ``via`` maps a host to an endpoint the others use to reach it (a proxy)."""
+        ``via[(host, other)]`` is the endpoint ``host`` reaches ``other`` at (a proxy)."""
         via = via or {}
         routers = []
-        for host in HOSTS:
-            others = [
-                via.get(o, f"tcp/{self.address(o)}:{PORT}")
-                for o in HOSTS
-                if o != host and HOSTS.index(o) < HOSTS.index(host)
-            ]
-            argv = [
-                "router",
-                "--listen",
-                f"tcp/127.0.0.1:{PORT}",
-                "--listen",
-                f"tcp/{self.address(host)}:{PORT}",
-            ]
-            for endpoint in others:
-                argv += ["--connect", endpoint]
+        for index, host in enumerate(HOSTS):
+            argv = ["router", "--listen", f"tcp/127.0.0.1:{PORT}"]
+            argv += ["--listen", f"tcp/{self.address(host)}:{PORT}"]
+            for other in HOSTS[:index]:
+                argv += ["--connect", via.get((host, other), f"tcp/{self.address(other)}:{PORT}")]
             routers.append(self.onebox(host, *argv))
         return routers
 
@@ -289,10 +281,12 @@ def lossy_proxy_process(
 
 
 @contextlib.contextmanager
-def pipeline(lab: Lab, sim_args: tuple[str, ...] = ()) -> Iterator[Probe]:
+def pipeline(
+    lab: Lab, via: dict[tuple[str, str], str] | None = None, sim_args: tuple[str, ...] = ()
+) -> Iterator[Probe]:
     """Routers on every host, the sim on A, the locator on B, a probe on C; yields the probe
     once C receives detections (so the whole path works)."""
-    lab.start_routers()
+    lab.start_routers(via)
     probe = lab.probe("c")
     if not probe.ready.wait(30):
         raise RuntimeError("the probe on C did not start")
