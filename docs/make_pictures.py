@@ -1,11 +1,16 @@
 """Make the README's pictures with onebox's own commands.
 
-    python docs/make_pictures.py              colour.png, depth.png and scene.png in docs/
-    python docs/make_pictures.py --no-scene   only the two pictures (no browser needed)
+    python docs/make_pictures.py              every picture below, in docs/
+    python docs/make_pictures.py --no-scene   all but scene.png (no browser needed)
+    python docs/make_pictures.py --worlds     only the scene files' pictures
 
 - docs/colour.png and docs/depth.png: the committed capture (tests/data/one_box.mcap), the
   colour picture as it is and the depth picture as ``onebox pixels`` shades it (near is bright,
   no reading is blue), each pixel 2 x 2.
+- docs/world_one_box.png, docs/world_pallet.png, docs/world_clutter.png: the colour picture of
+  each committed scene file (scene/*.toml), rendered as ``onebox sim --scene`` renders it;
+  clutter's 1280 x 720 halved. docs/world_pallet_depth.png: the pallet's depth through its
+  d435 noise, shaded as ``onebox pixels`` shades depth (near is bright, no reading is blue).
 - docs/scene.png: the live system (router, sim, points, locator, viewer) on private loopback
   ports, the viewer serving its web viewer, photographed by headless Chromium (Debian's
   ``chromium``, with SwiftShader for WebGL) through the DevTools protocol after --wait-s
@@ -75,6 +80,31 @@ def capture_pictures(out_dir: Path, scale: int = 2) -> None:
         big = picture.repeat(scale, axis=0).repeat(scale, axis=1)
         write_png(out_dir / name, big)
         print(f"wrote {out_dir / name} ({big.shape[1]} x {big.shape[0]})")
+
+
+def world_pictures(out_dir: Path) -> None:
+    """Colour of each committed scene file, and the pallet's depth with its d435 noise."""
+    import mujoco
+
+    from onebox.world import scene, spec
+    from onebox.world.noise import DepthNoise
+    from onebox.world.render import SceneRenderer
+
+    for name in ("one_box", "pallet", "clutter"):
+        desc = spec.load(ROOT / "scene" / f"{name}.toml")
+        model = scene.build_model(desc)
+        data = mujoco.MjData(model)
+        mujoco.mj_forward(model, data)
+        with SceneRenderer(model, scene.cameras(desc)[:1]) as renderer:
+            capture = renderer.render(data, "camera")
+        step = 2 if desc.camera.width > 640 else 1
+        pictures_out = {f"world_{name}.png": capture.rgb[::step, ::step]}
+        if name == "pallet":
+            noisy = DepthNoise(desc.noise, capture.depth_m.shape).apply(capture.depth_m)
+            pictures_out["world_pallet_depth.png"] = pixels.depth_grey(noisy)
+        for file, picture in pictures_out.items():
+            write_png(out_dir / file, np.ascontiguousarray(picture))
+            print(f"wrote {out_dir / file} ({picture.shape[1]} x {picture.shape[0]})")
 
 
 def free_port() -> int:
@@ -178,10 +208,14 @@ def scene(out: Path, wait_s: float) -> None:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--no-scene", action="store_true", help="skip the browser screenshot")
+    parser.add_argument("--worlds", action="store_true", help="only the scene files' pictures")
     parser.add_argument("--wait-s", type=float, default=40.0, help="browser load time (40)")
     parser.add_argument("--out", type=Path, default=DOCS, help="where to write (docs/)")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
+    world_pictures(args.out)
+    if args.worlds:
+        return 0
     capture_pictures(args.out)
     if not args.no_scene:
         scene(args.out / "scene.png", args.wait_s)
