@@ -39,7 +39,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from onebox import bus  # noqa: E402
+from onebox import bus
 from onebox.testing.processes import bus_args, free_port, private_router
 from schemas import Image
 
