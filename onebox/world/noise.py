@@ -206,25 +206,33 @@ class DepthNoise:
         spec = self.spec
         height, width = clean.shape
         with np.errstate(invalid="ignore"):
-            jump_x = np.abs(clean[:, 1:] - clean[:, :-1])
-            limit_x = np.float32(0.01) + np.float32(0.01) * np.fmin(clean[:, 1:], clean[:, :-1])
-            edge_x = jump_x > limit_x
-            jump_y = np.abs(clean[1:] - clean[:-1])
-            limit_y = np.float32(0.01) + np.float32(0.01) * np.fmin(clean[1:], clean[:-1])
-            edge_y = jump_y > limit_y
-        # A jump between two pixels marks both, then the band grows edge_px - 1 more each way.
+            limit = clean * np.float32(0.01)
+            limit += np.float32(0.01)
+            jump = np.diff(clean, axis=1)
+            np.abs(jump, out=jump)
+            edge_x = jump > limit[:, 1:]
+            jump = np.diff(clean, axis=0)
+            np.abs(jump, out=jump)
+            edge_y = jump > limit[1:]
+        # A jump between two pixels marks both; the band then grows edge_px - 1 more each way,
+        # along the rows and then along the columns.
         band = np.zeros((height, width), bool)
-        band[:, 1:] |= edge_x
+        band[:, 1:] = edge_x
         band[:, :-1] |= edge_x
         band[1:] |= edge_y
         band[:-1] |= edge_y
-        for _ in range(spec.edge_px - 1):
+        if spec.edge_px > 1:
             grown = band.copy()
-            grown[:, 1:] |= band[:, :-1]
-            grown[:, :-1] |= band[:, 1:]
-            grown[1:] |= band[:-1]
-            grown[:-1] |= band[1:]
-            band = grown
+            for k in range(1, spec.edge_px):
+                grown[:, k:] |= band[:, :-k]
+                grown[:, :-k] |= band[:, k:]
+            band = grown.copy()
+            for k in range(1, spec.edge_px):
+                band[k:] |= grown[:-k]
+                band[:-k] |= grown[k:]
+        if not spec.flying_share:
+            out[band] = np.nan
+            return
         rows, cols = np.nonzero(band)
         flying = self._rng.random(rows.size) < spec.flying_share
         out[rows[~flying], cols[~flying]] = np.nan
