@@ -51,7 +51,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
-from onebox import bus, geometry, keys, pictures, settings, sync
+from onebox import bus, geometry, keys, memory, pictures, settings, sync
 from onebox.errors import SettingError
 from onebox.geometry import FrameError, FrameTree, matrix_of
 from onebox.perception import seed
@@ -745,6 +745,7 @@ class Locator:
                     )
             if time.monotonic() >= next_log:
                 self._matcher.expire(MATCH_TIMEOUT_S)
+                memory.trim()
                 self.log_latest(logged)
                 logged = self.latest
                 if self._matched.dropped > dropped:
@@ -772,6 +773,7 @@ def describe_support(found: Found, frame: str) -> str:
 def main(args: argparse.Namespace) -> int:
     """Subscribe, measure every matched capture, publish detections, log every interval."""
     config = LocatorSettings.from_args(args)
+    memory.bound_heap()  # before Zenoh's threads start: pictures must not fragment the heap
     with bus.open_bus(args) as b:
         locator = Locator(b, config)
         locator.subscribe()
