@@ -125,8 +125,8 @@ class Found:
     frame: str = "camera"
 
 
-PAD = 2
-"""Empty pixels around the working crop, so looking two pixels past a top never wraps."""
+PAD = 3
+"""Empty pixels around the working crop, so looking three pixels past a top never wraps."""
 NEIGHBOURS = 4
 
 
@@ -145,6 +145,8 @@ class _Plateau:
     base_m: float = 0.0
     on_plateau: int | None = None
     platform: bool = False
+    on_platform: bool = False
+    """Stands on a platform (a pallet's top), where cartons stand packed side by side."""
     """A level others stand on whose own extent is hidden (a pallet's top): never a box."""
 
 
@@ -203,6 +205,7 @@ def find_boxes(
     basis = _plane_basis(support, camera_to_world)
     boxes = [p for p in plateaus if p.is_box]
     _bases(boxes, plateaus, height_m, labels_top, lens, support, settings)
+    _shadowed_sides(boxes, support.offset_camera_m, settings)
     reported = [b for b in boxes if not b.platform]
     return Found(support, _report(reported, support, basis, camera_to_world, settings), frame)
 
@@ -531,13 +534,21 @@ def _measure_all(
     extreme[0] = extreme[-1] = True
     extreme[change] = True
     extreme[change + 1] = True
-    e_level = level[e_top] + np.maximum(3.0 * tol[e_top], 0.005)
+    e_level = level[e_top] + np.maximum(1.5 * tol[e_top], 0.005)
     hidden = np.zeros(len(edge), dtype=bool)
+    unsure = np.zeros(len(edge), dtype=bool)
+    # Drop: past the pixel the surface is seen well below the top: a real edge, not a shadow.
+    drop = np.zeros(len(edge), dtype=bool)
+    e_low = level[e_top] - np.maximum(1.5 * tol[e_top], 0.005)
     for offset in offsets:
         off = label_at[e_flat + offset] != e_top + 1
-        rise = np.fmax(h_flat[e_flat + offset], h_flat[e_flat + 2 * offset])
+        beyond = h_flat[e_flat + offset]
+        rise = np.fmax(np.fmax(beyond, h_flat[e_flat + 2 * offset]), h_flat[e_flat + 3 * offset])
         with np.errstate(invalid="ignore"):
             hidden |= off & (rise > e_level)
+        unsure |= off & np.isnan(beyond)
+        with np.errstate(invalid="ignore"):
+            drop |= off & (np.fmin(beyond, h_flat[e_flat + 2 * offset]) < e_low)
     border = (tops.rows == 0) | (tops.rows == rows_n - 1) | (tops.cols == 0)
     border |= tops.cols == cols_n - 1
     cut_off = np.bincount(top[border], minlength=count) > 0
@@ -553,6 +564,8 @@ def _measure_all(
         e_top[chosen],
         hidden[chosen],
         extreme[chosen],
+        unsure[chosen],
+        drop[chosen],
         footprint,
         whole_area,
     )
@@ -647,17 +660,21 @@ def _spread(values: Float64Array) -> float:
 
 
 PROBE_FRACTIONS = np.linspace(-0.4, 0.4, 5)
+PROBE_REACH = np.array([1.0, 2.0, 4.0, 7.0])
+"""Each probe line's points, in steps of max(8 mm, 3 footprints) out from the side: the box
+itself hides the nearest when the camera looks down past that side."""
 
 
 def _probes(box: _Plateau) -> Float64Array:
-    """Points in the support plane just outside each side of a box's rectangle, 5 a side."""
+    """Lines of points in the support plane going out from each side of a box's rectangle,
+    5 lines a side (sides x lines x reaches x 2)."""
     assert box.rect is not None
     rect = box.rect
     ax = np.asarray(rect.axis)
     perp = np.array([-ax[1], ax[0]])
     mid = np.asarray(rect.middle)
-    reach = max(0.008, 3.0 * box.footprint_m)
-    points = []
+    step = max(0.008, 3.0 * box.footprint_m)
+    lines = []
     for direction, half, along, half_along in (
         (ax, rect.length_m / 2, perp, rect.width_m / 2),
         (-ax, rect.length_m / 2, perp, rect.width_m / 2),
@@ -665,8 +682,81 @@ def _probes(box: _Plateau) -> Float64Array:
         (-perp, rect.width_m / 2, ax, rect.length_m / 2),
     ):
         for f in PROBE_FRACTIONS:
-            points.append(mid + direction * (half + reach) + along * (2 * f * half_along))
-    return np.asarray(points)
+            start = mid + direction * half + along * (2 * f * half_along)
+            lines.append(start + np.outer(PROBE_REACH * step, direction))
+    return np.asarray(lines)
+
+
+def _shadowed_sides(
+    boxes: list[_Plateau], camera_height_m: float, settings: FinderSettings
+) -> None:
+    """A taller box beside a box, between it and the camera, hides a band of its top along
+    that side (band = height difference x how far the camera looks past the taller top). On
+    a platform (cartons on a pallet stand packed) the side runs on into the shadow, halfway
+    to the taller box's side; elsewhere (boxes strewn on a table) the seen extent stays."""
+    for box in boxes:
+        if not box.on_platform:
+            continue
+        assert box.rect is not None
+        rect = box.rect
+        ax = np.asarray(rect.axis)
+        perp = np.array([-ax[1], ax[0]])
+        mid = np.asarray(rect.middle)
+        half = {0: rect.length_m / 2, 1: rect.width_m / 2}
+        sides = [(ax, 0, 1.0), (perp, 1, 1.0), (-ax, 0, -1.0), (-perp, 1, -1.0)]
+        extent = [half[0], half[1], half[0], half[1]]
+        real = {(round(x, 6), round(y, 6)) for x, y in rect.edge_normals}
+        eaten = {(round(x, 6), round(y, 6)) for x, y in rect.dropout_normals}
+        for k, (normal, along_k, _) in enumerate(sides):
+            key = (round(float(normal[0]), 6), round(float(normal[1]), 6))
+            if key in real:
+                continue
+            # The seen edge may stop a footprint short of the shadow (noise), two more where
+            # the camera drops the readings along depth edges.
+            slack = max((3.0 if key in eaten else 2.0) * box.footprint_m, 0.005)
+            edge_mid = mid + normal * half[along_k]
+            toward = float(-edge_mid @ normal)  # the camera is above the plane's origin
+            if toward <= 0:
+                continue
+            side_dir = perp if along_k == 0 else ax
+            other_half = half[1 - along_k]
+            best = None
+            for other in boxes:
+                if other is box or other.height_m < box.height_m + settings.min_height_m:
+                    continue
+                assert other.rect is not None
+                corners = other.rect.corners - mid
+                near_edge = float((corners @ normal).min())
+                lateral = corners @ side_dir
+                if lateral.max() < -other_half + 0.01 or lateral.min() > other_half - 0.01:
+                    continue
+                rise = other.height_m - box.height_m
+                gap = near_edge - half[along_k]
+                band = rise * (toward - gap) / max(camera_height_m - other.height_m, 0.05)
+                # The top's seen edge ends where the shadow begins (within the noise):
+                # otherwise the floor between them was seen and the edge is the top's own.
+                if -slack <= gap <= band + slack and (best is None or near_edge < best):
+                    best = near_edge
+            if best is not None:
+                # Touching cartons end at the taller one's side, a gap in the shadow ends
+                # sooner: the middle of the shadow is never off by more than half of it.
+                extent[k] = 0.5 * (half[along_k] + best)
+        if extent != [half[0], half[1], half[0], half[1]]:
+            length = extent[0] + extent[2]
+            width = extent[1] + extent[3]
+            middle = mid + ax * (extent[0] - extent[2]) / 2 + perp * (extent[1] - extent[3]) / 2
+            axis = ax
+            if width > length:
+                length, width, axis = width, length, perp
+                if axis[0] < 0 or (axis[0] == 0 and axis[1] < 0):
+                    axis = -axis
+            box.rect = replace(
+                rect,
+                middle=(float(middle[0]), float(middle[1])),
+                axis=(float(axis[0]), float(axis[1])),
+                length_m=float(length),
+                width_m=float(width),
+            )
 
 
 def _reaches_under(lower: _Plateau, upper: _Plateau, slack: float = 0.01) -> bool:
@@ -711,12 +801,13 @@ def _bases(
     support_tol = 3.0 * float(support.sigma_at(support.distance_m))
     level_tol = np.maximum(np.array([support_tol] + [p.tolerance_m for p in plateaus]), 0.004)
     level_label = np.array([-1] + [p.label for p in plateaus])
-    probes = np.stack([_probes(box) for box in boxes])  # boxes x probes x 2
+    probes = np.stack([_probes(box) for box in boxes])  # boxes x lines x reaches x 2
     # Camera-frame probe points at every level: a e1 + b e2 + (level - offset) n.
+    shape = (-1, 1, 1, 1, 1)
     pts = (
-        probes[np.newaxis, :, :, :1] * cam[0]
-        + probes[np.newaxis, :, :, 1:] * cam[1]
-        + (level_h[:, np.newaxis, np.newaxis, np.newaxis] - support.offset_camera_m) * cam[2]
+        probes[np.newaxis, ..., :1] * cam[0]
+        + probes[np.newaxis, ..., 1:] * cam[1]
+        + (level_h.reshape(shape) - support.offset_camera_m) * cam[2]
     )
     z = pts[..., 2]
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -727,13 +818,21 @@ def _bases(
     vi = np.where(inside, v, 0).astype(np.intp)
     seen_h = np.where(inside, height_m[vi, ui], np.nan)
     seen_label = np.where(inside, labels_top[vi, ui] - 1, -2)
-    own = np.array([b.label for b in boxes])[np.newaxis, :, np.newaxis]
-    lh = level_h[:, np.newaxis, np.newaxis]
-    lt = level_tol[:, np.newaxis, np.newaxis]
-    ll = level_label[:, np.newaxis, np.newaxis]
+    own = np.array([b.label for b in boxes]).reshape(1, -1, 1, 1)
+    lh = level_h.reshape(shape[:-1])
+    lt = level_tol.reshape(shape[:-1])
+    ll = level_label.reshape(shape[:-1])
+    # Along each line the first point whose surface is seen (a reading, not the box itself,
+    # nothing higher in front of it) tells whether the level is there or lower.
     with np.errstate(invalid="ignore"):
-        match = (np.abs(seen_h - lh) < lt) & ((seen_label == -1) | (seen_label == ll))
-        lower = (seen_h < lh - lt) & (seen_label != own)
+        known = np.isfinite(seen_h) & (seen_label != own) & (seen_h < lh + lt)
+        first = np.argmax(known, axis=-1)[..., np.newaxis]
+        any_known = known.any(axis=-1)
+        h_first = np.take_along_axis(seen_h, first, -1)[..., 0]
+        label_first = np.take_along_axis(seen_label, first, -1)[..., 0]
+        match = any_known & (np.abs(h_first - lh[..., 0]) < lt[..., 0])
+        match &= (label_first == -1) | (label_first == ll[..., 0])
+        lower = any_known & (h_first < lh[..., 0] - lt[..., 0])
     matches, lowers = match.sum(axis=2), lower.sum(axis=2)
     box_h = np.array([b.height_m for b in boxes])
     allowed = level_h[:, np.newaxis] < box_h[np.newaxis, :] - settings.min_height_m
@@ -780,6 +879,7 @@ def _bases(
         level = levels[base[i]]
         if level is not None and base[i] in platforms:
             level.platform = True
+            box.on_platform = True
         elif level is not None and level.is_box:
             box.on_plateau = level.label
 

@@ -42,6 +42,11 @@ class Rectangle:
     hidden_normals: tuple[tuple[float, float], ...] = ()
     """Outward unit normals of the sides that something standing on or in front of the top
     hides: the top may go on under it that way."""
+    edge_normals: tuple[tuple[float, float], ...] = ()
+    """Outward unit normals of the sides past which the surface is seen dropping: real edges."""
+    dropout_normals: tuple[tuple[float, float], ...] = ()
+    """Outward unit normals of the sides with no readings past many of their pixels (an
+    edge's dropout, which may eat a pixel or two of the top)."""
 
     @property
     def corners(self) -> Float64Array:
@@ -52,171 +57,6 @@ class Rectangle:
         return np.array(
             [m + s * hl * ax + t * hw * across for s, t in ((1, 1), (-1, 1), (-1, -1), (1, -1))]
         )
-
-
-def min_area_axis(points: Float64Array) -> Float64Array | None:
-    """The direction of one side of the smallest-area rectangle around the points: every
-    degree tried, then every twentieth of a degree around the best."""
-    if len(points) < 3 or float(np.ptp(points, axis=0).min()) <= 0.0:
-        return None
-    centred = points - points.mean(axis=0)
-    best = 0.0
-    for step, span in ((1.0, 90.0), (0.05, 1.0)):
-        angles = np.radians(
-            best + np.arange(-span / 2, span / 2, step) if span < 90 else np.arange(0.0, 90.0, step)
-        )
-        directions = np.stack([np.cos(angles), np.sin(angles)])
-        along = centred @ directions
-        across = centred @ np.stack([-directions[1], directions[0]])
-        area = np.ptp(along, axis=0) * np.ptp(across, axis=0)
-        best = float(np.degrees(angles[int(area.argmin())]))
-    angle = math.radians(best)
-    return np.array([math.cos(angle), math.sin(angle)])
-
-
-def _sides(
-    points: Float64Array, axis: Float64Array, band_m: float
-) -> tuple[Float64Array, Float64Array, npt.NDArray[np.intp], BoolArray, tuple[float, ...]]:
-    """Each point's coordinates along the axis and across it, the nearest of the four sides
-    (+x, +y, -x, -y), whether it lies within ``band_m`` of that side (outline pixels around a
-    hole lie deeper inside and are no side's), and the middle and half sizes."""
-    normal = np.array([-axis[1], axis[0]])
-    x = points @ axis
-    y = points @ normal
-    mx, my = 0.5 * (x.max() + x.min()), 0.5 * (y.max() + y.min())
-    hx, hy = 0.5 * np.ptp(x), 0.5 * np.ptp(y)
-    x0, y0 = x - mx, y - my
-    gaps = np.stack([hx - x0, hy - y0, hx + x0, hy + y0], axis=1)
-    side = gaps.argmin(axis=1)
-    near = gaps[np.arange(len(side)), side] < band_m
-    return x, y, side, near, (mx, my, hx, hy)
-
-
-def _refine_axis(
-    edge: Float64Array,
-    hidden: BoolArray,
-    axis: Float64Array,
-    footprint_m: float,
-    iterations: int = 1,
-) -> tuple[Float64Array, list[Float64Array], list[float]]:
-    """Refine the axis with a joint fit of the four sides to the visible outline; returns the
-    axis, per side (+x, +y, -x, -y) the visible outline points' perpendicular coordinates, and
-    per side the share of its outline points that are hidden."""
-    band = 4.0 * footprint_m
-    use = ~hidden if int(np.count_nonzero(~hidden)) >= 6 else np.ones(len(edge), dtype=bool)
-    for _ in range(iterations):
-        x, y, side, near, (mx, my, _, _) = _sides(edge, axis, band)
-        pick = near & use
-        x0, y0, side = x[pick] - mx, y[pick] - my, side[pick]
-        # Small-angle model: on the +-x sides x = c_k - theta * y, on the +-y sides
-        # y = c_k + theta * x. Unknowns: theta, c_0..c_3.
-        counts = np.bincount(side, minlength=4)
-        if np.count_nonzero(counts[[0, 2]]) + np.count_nonzero(counts[[1, 3]]) < 3:
-            break
-        on_x = (side == 0) | (side == 2)
-        u = np.where(on_x, -y0, x0)
-        target = np.where(on_x, x0, y0)
-        # Normal equations of [u, one-hot(side)] by sums per side: no design matrix.
-        used = np.flatnonzero(counts)
-        su = np.bincount(side, weights=u, minlength=4)[used]
-        st = np.bincount(side, weights=target, minlength=4)[used]
-        normal_eq = np.zeros((len(used) + 1, len(used) + 1))
-        normal_eq[0, 0] = float(u @ u)
-        normal_eq[0, 1:] = normal_eq[1:, 0] = su
-        normal_eq[1:, 1:] = np.diag(counts[used].astype(np.float64))
-        rhs = np.r_[float(u @ target), st]
-        try:
-            theta = float(np.linalg.solve(normal_eq, rhs)[0])
-        except np.linalg.LinAlgError:
-            break
-        if not math.isfinite(theta) or abs(theta) > 0.2:
-            break
-        c, s = math.cos(theta), math.sin(theta)
-        axis = np.array([c * axis[0] - s * axis[1], s * axis[0] + c * axis[1]])
-        if abs(theta) < 1e-7:
-            break
-    x, y, side, near, _ = _sides(edge, axis, band)
-    coords = (x, y, x, y)
-    sides = []
-    hidden_share = []
-    for k in range(4):
-        on_k = near & (side == k)
-        sides.append(coords[k][on_k & use])
-        total = int(np.count_nonzero(on_k))
-        hidden_share.append(float(np.count_nonzero(hidden[on_k])) / total if total else 1.0)
-    return axis, sides, hidden_share
-
-
-def fit_rectangle(
-    edge: Float64Array,
-    hidden: BoolArray,
-    footprint_m: float,
-    area_m2: float,
-    hull_points: BoolArray | None = None,
-) -> Rectangle | None:
-    """The top's rectangle (see the module docstring) from its outline points alone;
-    ``hull_points`` marks a subset holding the outline's convex hull (each row's ends)."""
-    if len(edge) < 4:
-        return None
-    axis = min_area_axis(edge if hull_points is None else edge[hull_points])
-    if axis is None:
-        return None
-    axis, sides, hidden_share = _refine_axis(edge, hidden, axis, footprint_m)
-    normal = np.array([-axis[1], axis[0]])
-    x_all, y_all = edge @ axis, edge @ normal
-    extremes = (x_all.max(), y_all.max(), x_all.min(), y_all.min())
-    # A side is fitted from its own visible outline pixels when it has enough of them;
-    # otherwise (hidden, or dropped out) the top's farthest pixel along it bounds it.
-    expected = (np.ptp(y_all), np.ptp(x_all), np.ptp(y_all), np.ptp(x_all))
-    position = []
-    hidden_k = []
-    for k in range(4):
-        values = sides[k]
-        enough = len(values) >= 3 and len(values) * footprint_m >= 0.3 * expected[k]
-        if enough and hidden_share[k] < 0.5:
-            # Trim the few outline points that noise put far inside the edge.
-            position.append(float(np.median(values)) if len(values) < 8 else _trimmed(values, k))
-        else:
-            position.append(float(extremes[k]))
-            hidden_k.append(k)
-    length0 = position[0] - position[2]
-    width0 = position[1] - position[3]
-    if not hidden_k and length0 > 0 and width0 > 0:
-        total = length0 + width0
-        margin = 0.5 * (
-            -total + math.sqrt(max(total * total - 4 * (length0 * width0 - area_m2), 0))
-        )
-        margin = min(max(margin, 0.0), 2.0 * footprint_m)
-    else:
-        margin = footprint_m
-    length, width = length0 + margin, width0 + margin
-    mx, my = 0.5 * (position[0] + position[2]), 0.5 * (position[1] + position[3])
-    middle = mx * axis + my * normal
-    outward = (axis, normal, -axis, -normal)
-    hidden_normals = tuple((float(outward[k][0]), float(outward[k][1])) for k in hidden_k)
-    if width > length:
-        length, width = width, length
-        axis = normal
-    if axis[0] < 0 or (axis[0] == 0 and axis[1] < 0):
-        axis = -axis
-    return Rectangle(
-        middle=(float(middle[0]), float(middle[1])),
-        axis=(float(axis[0]), float(axis[1])),
-        length_m=float(length),
-        width_m=float(width),
-        hidden_sides=len(hidden_k),
-        area_m2=area_m2,
-        hidden_normals=hidden_normals,
-    )
-
-
-def _trimmed(values: Float64Array, side: int) -> float:
-    """The mean of a side's outline coordinates, leaving out the innermost fifth (noise and
-    pixels at the corners that belong to the next side)."""
-    ordered = np.sort(values)
-    cut = len(ordered) // 5
-    kept = ordered[cut:] if side < 2 else ordered[: len(ordered) - cut]
-    return float(kept.mean())
 
 
 def _group_extent(
@@ -234,12 +74,16 @@ def fit_rectangles(
     group: npt.NDArray[np.intp],
     hidden: BoolArray,
     hull_points: BoolArray,
+    unsure: BoolArray,
+    drop: BoolArray,
     footprint_m: Float64Array,
     area_m2: Float64Array,
 ) -> list[Rectangle | None]:
     """:func:`fit_rectangle` for many tops at once: ``edge`` holds every top's outline points,
-    grouped (``group`` ascending, 0..G-1, each top's points together), ``hull_points`` marks
-    each top's row ends; one rectangle (or None, too few points) per group."""
+        grouped (``group`` ascending, 0..G-1, each top's points together), ``hull_points`` marks
+        each top's row ends, ``unsure`` the outline points with no reading past them (the edge
+    lies farther: left out of the sides' fit); one rectangle (or None, too few points) per
+    group."""
     count = len(footprint_m)
     sizes = np.bincount(group, minlength=count)
     hull_sizes = np.bincount(group[hull_points], minlength=count)
@@ -249,6 +93,7 @@ def fit_rectangles(
         return result
     keep = ok[group]
     edge, group, hidden, hull_points = edge[keep], group[keep], hidden[keep], hull_points[keep]
+    unsure, drop = unsure[keep], drop[keep]
     ids = np.flatnonzero(ok)
     remap = np.full(count, -1)
     remap[ids] = np.arange(len(ids))
@@ -308,6 +153,8 @@ def fit_rectangles(
     seen_n = np.bincount(key_all[pick], minlength=4 * n_groups)
     near_n = np.bincount(key_all[near], minlength=4 * n_groups)
     hidden_n = np.bincount(key_all[near & hidden], minlength=4 * n_groups)
+    drop_n = np.bincount(key_all[near & drop], minlength=4 * n_groups)
+    unsure_n = np.bincount(key_all[near & unsure], minlength=4 * n_groups)
     order = np.lexsort(((sign * coord)[pick], key_all[pick]))
     keys_sorted = key_all[pick][order]
     values_sorted = coord[pick][order]
@@ -325,13 +172,20 @@ def fit_rectangles(
     share = hidden_n / np.maximum(near_n, 1)
     share[near_n == 0] = 1.0
     enough = (seen_n >= 3) & (seen_n * np.repeat(footprint, 4) >= 0.3 * expected)
-    fitted = enough & (share < 0.5)
+    hidden_side = share >= 0.5
+    fitted = enough & ~hidden_side
     position = np.where(fitted, position, extremes).reshape(n_groups, 4)
-    hidden_side = ~fitted.reshape(n_groups, 4)
+    hidden_side = hidden_side.reshape(n_groups, 4)
+    fitted = fitted.reshape(n_groups, 4)
+    real = (drop_n >= 0.25 * np.maximum(near_n, 1)).reshape(n_groups, 4)
+    eaten = (unsure_n >= 0.3 * np.maximum(near_n, 1)).reshape(n_groups, 4)
     for i, top in enumerate(ids):
         result[top] = _rectangle(
             position[i],
             hidden_side[i],
+            fitted[i],
+            real[i],
+            eaten[i],
             float(theta[i]),
             centre[i],
             float(footprint[i]),
@@ -367,12 +221,16 @@ def _all_sides(
 def _rectangle(
     position: Float64Array,
     hidden_side: BoolArray,
+    fitted: BoolArray,
+    real: BoolArray,
+    eaten: BoolArray,
     theta: float,
     centre: Float64Array,
     footprint_m: float,
     area_m2: float,
 ) -> Rectangle | None:
-    """The rectangle from its four side positions (+x, +y, -x, -y along the angle)."""
+    """The rectangle from its four side positions (+x, +y, -x, -y along the angle): fitted
+    sides, or the farthest pixel centres (then half a footprint lies beyond each)."""
     axis = np.array([math.cos(theta), math.sin(theta)])
     normal = np.array([-axis[1], axis[0]])
     length0 = float(position[0] - position[2])
@@ -380,7 +238,7 @@ def _rectangle(
     if length0 <= 0 or width0 <= 0:
         return None
     hidden_k = [k for k in range(4) if hidden_side[k]]
-    if not hidden_k:
+    if fitted.all():
         total = length0 + width0
         margin = 0.5 * (
             -total + math.sqrt(max(total * total - 4 * (length0 * width0 - area_m2), 0))
@@ -392,7 +250,13 @@ def _rectangle(
     middle = centre + 0.5 * (position[0] + position[2]) * axis
     middle = middle + 0.5 * (position[1] + position[3]) * normal
     outward = (axis, normal, -axis, -normal)
-    hidden_normals = tuple((float(outward[k][0]), float(outward[k][1])) for k in hidden_k)
+
+    def normals(pick: list[int]) -> tuple[tuple[float, float], ...]:
+        return tuple((float(outward[k][0]), float(outward[k][1])) for k in pick)
+
+    hidden_normals = normals(hidden_k)
+    edge_normals = normals([k for k in range(4) if real[k]])
+    dropout_normals = normals([k for k in range(4) if eaten[k]])
     if width > length:
         length, width = width, length
         axis = normal
@@ -406,4 +270,6 @@ def _rectangle(
         hidden_sides=len(hidden_k),
         area_m2=area_m2,
         hidden_normals=hidden_normals,
+        edge_normals=edge_normals,
+        dropout_normals=dropout_normals,
     )
