@@ -89,6 +89,9 @@ class FinderSettings:
     """Report tops cut off by the picture's border (their size is then a lower bound)."""
     match_distance_m: float = 0.02
     """BoxFinder: a box within this of last picture's box (and of a similar size) keeps its id."""
+    max_pixels: int | None = 640 * 480
+    """Larger pictures are read at every k-th pixel (k = 2 for 1280 x 720) to keep camera rate;
+    sizes are then good to that coarser footprint. None reads every pixel."""
 
 
 @dataclass(frozen=True)
@@ -188,6 +191,13 @@ def find_boxes(
     """Every box in the picture (see the module docstring); ``support`` skips the plane fit."""
     depth = np.asarray(depth_m, dtype=np.float32)
     frame = "world" if camera_to_world is not None else "camera"
+    stride = _stride(depth.shape, settings.max_pixels)
+    if stride > 1:
+        # Pixel k * u' is pixel u' of the coarse picture: its ray is unchanged, so the lens
+        # scales exactly (middle of pixel u at u: cx / k, not (cx + 0.5) / k - 0.5).
+        depth = depth[::stride, ::stride]
+        colour = None if colour is None else colour[::stride, ::stride]
+        lens = Intrinsics(lens.fx / stride, lens.fy / stride, lens.cx / stride, lens.cy / stride)
     if support is None:
         support = fit_support(
             depth,
@@ -208,6 +218,13 @@ def find_boxes(
     _shadowed_sides(boxes, support.offset_camera_m, settings)
     reported = [b for b in boxes if not b.platform]
     return Found(support, _report(reported, support, basis, camera_to_world, settings), frame)
+
+
+def _stride(shape: tuple[int, ...], max_pixels: int | None) -> int:
+    """Every how many pixels a picture is read (1: all)."""
+    if max_pixels is None or shape[0] * shape[1] <= max_pixels:
+        return 1
+    return math.ceil(math.sqrt(shape[0] * shape[1] / max_pixels))
 
 
 def _crop(standing: BoolArray) -> tuple[slice, slice] | None:
