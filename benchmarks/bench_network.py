@@ -21,6 +21,7 @@ import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import zenoh
 
@@ -149,7 +150,7 @@ def bench_shm(count: int, restarts: int) -> None:
         )
 
 
-def bench_hosts(runs: int, down_s: float, loss_s: float) -> None:
+def bench_hosts(runs: int, down_s: float, loss_s: float, only: str | None) -> None:
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     import netlab  # benchmarks/ is a folder of programs, not a package
 
@@ -157,6 +158,16 @@ def bench_hosts(runs: int, down_s: float, loss_s: float) -> None:
     if reason:
         print(f"hosts: skipped, {reason}")
         return
+    print(f"load average at the start: {' '.join(f'{x:.1f}' for x in os.getloadavg())}")
+    if only in (None, "outage"):
+        bench_outages(netlab, runs, down_s)
+    if only in (None, "loss"):
+        bench_loss(netlab, loss_s)
+    print(f"load average at the end: {' '.join(f'{x:.1f}' for x in os.getloadavg())}")
+
+
+def bench_outages(netlab: Any, runs: int, down_s: float) -> None:
+    """B's link down ``down_s``, ``runs`` times, in one lab."""
     print(
         f"hosts: sim on A, locator on B, subscriber on C; B's link down {down_s:.0f} s, "
         f"{runs} times"
@@ -165,23 +176,35 @@ def bench_hosts(runs: int, down_s: float, loss_s: float) -> None:
     gaps: list[float] = []
     with netlab.Lab(subnet=8) as lab, netlab.pipeline(lab) as probe:
         for run in range(runs):
-            took, gap = netlab.outage(lab, probe, "b", down_s)
+            took, gap, at = netlab.outage(lab, probe, "b", down_s)
             gaps.append(gap)
             if took is not None:
                 recovered.append(took)
             print(
-                f"  run {run + 1}: first detection at C {took if took is None else round(took, 2)}"
-                f" s after the link returned; longest A -> C depth gap {gap:.2f} s"
+                f"  run {run + 1}: first detection at C "
+                f"{'never' if took is None else f'{took:.2f} s'} after the link returned; "
+                f"longest A -> C depth gap {gap:.2f} s, from {at:.1f} s after the link went down",
+                flush=True,
             )
+    if recovered:
+        print(
+            f"recovered in {len(recovered)} of {runs} runs; first detection after the link "
+            f"returned: median {statistics.median(recovered):.2f} s, worst {max(recovered):.2f} s"
+        )
+    else:
+        print(f"recovered in 0 of {runs} runs")
     print(
-        f"recovered in {len(recovered)} of {runs} runs; first detection after the link "
-        f"returned: median {statistics.median(recovered):.2f} s, worst {max(recovered):.2f} s"
+        f"A -> C depth from B's link going down to 3 s after its return: longest gap median "
+        f"{statistics.median(gaps):.2f} s, worst {max(gaps):.2f} s (5 Hz: 0.20 s apart)"
     )
-    print(f"A -> C depth during B's outages: longest gap {max(gaps):.2f} s (5 Hz: 0.20 s apart)")
 
+
+def bench_loss(netlab: Any, loss_s: float) -> None:
+    """B's links through a :class:`netlab.LossyProxy`: 20 ms each way, 5 % of chunks stalled."""
     print(
-        f"\nhosts: B's links through a proxy adding 20 ms each way and a 200 ms stall to 5 % "
-        f"of chunks (TCP's retransmission of a lost segment), {loss_s:.0f} s"
+        f"\nhosts: B's links (B -> A and C -> B) through a TCP proxy that delays every chunk it "
+        f"forwards 20 ms and stalls 5 % of chunks a further 200 ms (Linux's least TCP "
+        f"retransmission timeout: what a lost segment costs on TCP), {loss_s:.0f} s"
     )
     with netlab.Lab(subnet=9) as lab:
         with (
@@ -192,11 +215,15 @@ def bench_hosts(runs: int, down_s: float, loss_s: float) -> None:
             start = time.monotonic()
             time.sleep(loss_s)  # the window being measured
             end = time.monotonic()
-            captures = probe.count("camera/depth/image_raw", start, end)
-            detected = probe.count("detections", start, end)
+            probe.wait_for(netlab.DETECTIONS, end + 5.0, 10.0)  # the window's last detections
+            captures, detected = probe.detected(start, end, settle_s=5.0)
+            latency = probe.latencies(start, end)
+    p50 = statistics.median(latency) * 1000 if latency else float("nan")
+    p95 = latency[int(0.95 * (len(latency) - 1))] * 1000 if latency else float("nan")
     print(
-        f"captures at C {captures}, detections at C {detected}: "
-        f"{100 * detected / max(captures, 1):.1f} % detected"
+        f"captures (ground truth stamps at C) {captures}, with their detection at C {detected}: "
+        f"{100 * detected / max(captures, 1):.1f} % detected; capture -> detection at C "
+        f"p50 {p50:.0f} ms, p95 {p95:.0f} ms"
     )
 
 
@@ -212,11 +239,12 @@ def main() -> int:
     hosts.add_argument("--runs", type=int, default=5)
     hosts.add_argument("--down-s", type=float, default=15.0)
     hosts.add_argument("--loss-s", type=float, default=60.0)
+    hosts.add_argument("--only", choices=("outage", "loss"), help="run one of the two")
     args = parser.parse_args()
     if args.what == "shm":
         bench_shm(args.count, args.restarts)
     else:
-        bench_hosts(args.runs, args.down_s, args.loss_s)
+        bench_hosts(args.runs, args.down_s, args.loss_s, args.only)
     return 0
 
 

@@ -21,8 +21,10 @@ import contextlib
 import itertools
 import os
 import random
+import shutil
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Iterator
@@ -33,17 +35,33 @@ HOSTS = ("a", "b", "c")
 PORT = 7447
 
 PROBE = r"""
-import sys, time, zenoh
-config = zenoh.Config.from_file("config/client.json5")
+import sys, threading, time, zenoh
+from onebox import keys
+from schemas import codec
+decoders = {
+    keys.CAMERA.depth: codec(keys.TYPES[keys.CAMERA.depth]),
+    keys.DETECTIONS: codec(keys.TYPES[keys.DETECTIONS]),
+    keys.GROUND_TRUTH: codec(keys.TYPES[keys.GROUND_TRUTH]),
+}
+lock = threading.Lock()  # callbacks of different subscribers run on different threads
 def on(sample):
-    print(str(sample.key_expr), f"{time.monotonic():.4f}", flush=True)
+    key = str(sample.key_expr)
+    stamp = decoders[key].decode(sample.payload.to_bytes()).header.stamp_ns
+    with lock:
+        sys.stdout.write(f"{key} {time.monotonic():.4f} {stamp}\n")
+        sys.stdout.flush()
+config = zenoh.Config.from_file("config/client.json5")
+config.insert_json5("connect/timeout_ms", "60000")
 with zenoh.open(config) as s:
-    s.declare_subscriber("camera/depth/image_raw", on)
-    s.declare_subscriber("detections", on)
+    for key in decoders:
+        s.declare_subscriber(key, on)
     print("probe ready", flush=True)
     sys.stdin.read()
 """
-"""A subscriber printing ``key monotonic-time`` for each depth picture and detection."""
+"""A subscriber printing ``key monotonic-time stamp_ns`` for each depth picture, detection and
+ground truth (one a capture, reliable: what the sim captured)."""
+
+DEPTH, DETECTIONS, TRUTH = "camera/depth/image_raw", "detections", "sim/ground_truth"
 
 
 def can_run() -> str | None:
@@ -71,6 +89,10 @@ class Lab:
         self.subnet = subnet
         self.switch = f"{self.tag}sw"
         self.procs: list[subprocess.Popen[str]] = []
+        # Each process writes to its own file: a pipe nobody reads would, once full, block the
+        # process on its next log line (a router or locator stalled by its own logging).
+        self.logs = Path(tempfile.mkdtemp(prefix=f"{self.tag}-"))
+        self._log_of: dict[int, Path] = {}
 
     def ns(self, host: str) -> str:
         return f"{self.tag}{host}"
@@ -127,20 +149,56 @@ class Lab:
                         pipe.close()
         for name in (*(self.ns(h) for h in HOSTS), self.switch):
             subprocess.run(["ip", "netns", "del", name], check=False, capture_output=True)
+        if os.environ.get("ONEBOX_NETLAB_LOGS"):
+            print(f"netlab: the processes' output is kept in {self.logs}", file=sys.stderr)
+        else:
+            shutil.rmtree(self.logs, ignore_errors=True)
 
     def run(self, host: str, *argv: str, stdin: bool = False) -> subprocess.Popen[str]:
-        """Start ``argv`` inside ``host``'s namespace; output captured, unbuffered."""
+        """Start ``argv`` inside ``host``'s namespace, its output going to a log file (see
+        :meth:`output`); with ``stdin`` its output is a pipe the caller reads instead."""
+        log = self.logs / f"{len(self.procs):02d}-{host}-{Path(argv[-1]).name[:24]}.log"
+        out = subprocess.PIPE if stdin else log.open("w")
         proc = subprocess.Popen(
             ["ip", "netns", "exec", self.ns(host), *argv],
             cwd=ROOT,
             env={**os.environ, "PYTHONUNBUFFERED": "1"},
             stdin=subprocess.PIPE if stdin else subprocess.DEVNULL,
-            stdout=subprocess.PIPE,
+            stdout=out,
             stderr=subprocess.STDOUT,
             text=True,
         )
+        if not stdin:
+            out.close()  # type: ignore[union-attr]  # the child holds its own copy
+            self._log_of[proc.pid] = log
         self.procs.append(proc)
         return proc
+
+    def output(self, proc: subprocess.Popen[str], lines: int = 20) -> str:
+        """The last ``lines`` of what ``proc`` wrote."""
+        log = self._log_of.get(proc.pid)
+        if log is None or not log.exists():
+            return ""
+        return "\n".join(log.read_text(errors="replace").splitlines()[-lines:])
+
+    def wait_listening(self, host: str, port: int, proc: subprocess.Popen[str]) -> None:
+        """Block until something in ``host`` listens on TCP ``port``; raise if ``proc`` dies
+        first or 60 s pass (a loaded machine starts Python slowly)."""
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            listening = subprocess.run(
+                ["ip", "netns", "exec", self.ns(host), "ss", "-Hltn", f"sport = :{port}"],
+                capture_output=True,
+                text=True,
+            ).stdout.strip()
+            if listening:
+                return
+            if proc.poll() is not None:
+                raise RuntimeError(
+                    f"{proc.args[-1]!r} on {host} exited {proc.returncode}:\n{self.output(proc)}"
+                )
+            time.sleep(0.1)  # polling the kernel's socket table: there is no event to wait on
+        raise RuntimeError(f"nothing listens on port {port} in {host} after 60 s")
 
     def onebox(self, host: str, *argv: str) -> subprocess.Popen[str]:
         return self.run(host, sys.executable, "-m", "services.cli", *argv)
@@ -148,7 +206,9 @@ class Lab:
     def start_routers(
         self, via: dict[tuple[str, str], str] | None = None
     ) -> list[subprocess.Popen[str]]:
-        """A router per host on loopback and its address, each connected to the hosts before it.
+        """A router per host on loopback and its address, in a full mesh: each connects to the
+        hosts before it (B to A, C to A and B), so no host's traffic to another passes through
+        a third. Returns once every router listens.
 
         ``via[(host, other)]`` is the endpoint ``host`` reaches ``other`` at (a proxy)."""
         via = via or {}
@@ -159,6 +219,8 @@ class Lab:
             for other in HOSTS[:index]:
                 argv += ["--connect", via.get((host, other), f"tcp/{self.address(other)}:{PORT}")]
             routers.append(self.onebox(host, *argv))
+        for host, router in zip(HOSTS, routers, strict=True):
+            self.wait_listening(host, PORT, router)
         return routers
 
     def link(self, host: str, up: bool) -> None:
@@ -166,15 +228,18 @@ class Lab:
         _ip("link", "set", f"p{host}", "up" if up else "down", ns=self.switch)
 
     def probe(self, host: str) -> Probe:
+        """A :data:`PROBE` in ``host``; its output is read as it comes."""
         return Probe(self.run(host, sys.executable, "-c", PROBE, stdin=True))
 
 
 class Probe:
-    """Arrival times of depth pictures and detections at one host."""
+    """Arrival times and stamps of depth pictures, detections and ground truth at one host."""
 
     def __init__(self, proc: subprocess.Popen[str]) -> None:
         self.proc = proc
-        self.times: dict[str, list[float]] = {"camera/depth/image_raw": [], "detections": []}
+        self.times: dict[str, list[float]] = {DEPTH: [], DETECTIONS: [], TRUTH: []}
+        self.stamps: dict[str, list[tuple[float, int]]] = {DEPTH: [], DETECTIONS: [], TRUTH: []}
+        self.lines: list[str] = []
         self._cond = threading.Condition()
         self.ready = threading.Event()
         threading.Thread(target=self._read, daemon=True).start()
@@ -186,10 +251,24 @@ class Probe:
                 self.ready.set()
                 continue
             parts = line.split()
-            if len(parts) == 2 and parts[0] in self.times:
+            if len(parts) == 3 and parts[0] in self.times:
                 with self._cond:
                     self.times[parts[0]].append(float(parts[1]))
+                    self.stamps[parts[0]].append((float(parts[1]), int(parts[2])))
                     self._cond.notify_all()
+            else:
+                self.lines = [*self.lines[-19:], line.rstrip()]
+        with self._cond:
+            self._cond.notify_all()
+
+    def wait_ready(self, timeout_s: float) -> None:
+        """Block until the probe subscribes; raise with its output if it dies or is slow."""
+        deadline = time.monotonic() + timeout_s
+        while not self.ready.wait(0.2):
+            if self.proc.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(
+                    f"the probe did not start (exit {self.proc.poll()}):\n" + "\n".join(self.lines)
+                )
 
     def wait_for(self, key: str, after: float, timeout_s: float) -> float | None:
         """The first arrival on ``key`` after monotonic ``after``, waiting up to ``timeout_s``."""
@@ -201,15 +280,32 @@ class Probe:
             self._cond.wait_for(lambda: first() is not None, timeout=timeout_s)
             return first()
 
-    def max_gap(self, key: str, start: float, end: float) -> float:
-        """The longest time without ``key`` between ``start`` and ``end``."""
+    def max_gap(self, key: str, start: float, end: float) -> tuple[float, float]:
+        """The longest time without ``key`` between ``start`` and ``end``, and when it began
+        (seconds after ``start``)."""
         with self._cond:
             times = [start, *(t for t in self.times[key] if start < t < end), end]
-        return max(b - a for a, b in itertools.pairwise(times))
+        gap, at = max((b - a, a) for a, b in itertools.pairwise(times))
+        return gap, at - start
 
     def count(self, key: str, start: float, end: float) -> int:
         with self._cond:
             return sum(1 for t in self.times[key] if start < t < end)
+
+    def detected(self, start: float, end: float, settle_s: float) -> tuple[int, int]:
+        """(captures, captures with a detection): the captures are the stamps of the ground
+        truth that arrived between ``start`` and ``end``; a detection counts when its stamp is
+        one of them and it arrives within ``settle_s`` after ``end``."""
+        with self._cond:
+            captures = {s for t, s in self.stamps[TRUTH] if start < t < end}
+            found = {s for t, s in self.stamps[DETECTIONS] if start < t < end + settle_s}
+        return len(captures), len(captures & found)
+
+    def latencies(self, start: float, end: float) -> list[float]:
+        """Seconds from each capture's ground truth at C to its detection at C."""
+        with self._cond:
+            truth = {s: t for t, s in self.stamps[TRUTH] if start < t < end}
+            return sorted(t - truth[s] for t, s in self.stamps[DETECTIONS] if s in truth)
 
 
 class LossyProxy:
@@ -275,6 +371,7 @@ def lossy_proxy_process(
     )
     proc = lab.run(host, sys.executable, "-c", code)
     try:
+        lab.wait_listening(host, listen_port, proc)
         yield f"tcp/{lab.address(host)}:{listen_port}"
     finally:
         proc.terminate()
@@ -288,25 +385,31 @@ def pipeline(
     once C receives detections (so the whole path works)."""
     lab.start_routers(via)
     probe = lab.probe("c")
-    if not probe.ready.wait(30):
-        raise RuntimeError("the probe on C did not start")
-    lab.onebox("b", "locator")
-    lab.onebox("a", "sim", *sim_args)
-    if probe.wait_for("detections", 0.0, 90) is None:
-        raise RuntimeError("no detection reached C from B within 90 s")
+    probe.wait_ready(60)
+    locator = lab.onebox("b", "locator")
+    sim = lab.onebox("a", "sim", *sim_args)
+    if probe.wait_for(DETECTIONS, 0.0, 90) is None:
+        raise RuntimeError(
+            "no detection reached C from B within 90 s\nsim:\n"
+            f"{lab.output(sim)}\nlocator:\n{lab.output(locator)}"
+        )
     yield probe
 
 
 def outage(
     lab: Lab, probe: Probe, host: str = "b", down_s: float = 15.0, recover_timeout_s: float = 60.0
-) -> tuple[float | None, float]:
+) -> tuple[float | None, float, float]:
     """Take ``host``'s link down ``down_s``, bring it back; returns (seconds from the link's
-    return to the first detection at C, or None; the longest depth gap at C while it was down)."""
+    return to the first detection at C, or None; the longest A -> C depth gap from the link's
+    going down to 3 s after its return; when that gap began, seconds after the link went
+    down)."""
     lab.link(host, up=False)
     down_at = time.monotonic()
     time.sleep(down_s)  # the outage itself is what is measured: its length is the experiment
     lab.link(host, up=True)
     up_at = time.monotonic()
-    gap = probe.max_gap("camera/depth/image_raw", down_at, up_at)
-    first = probe.wait_for("detections", up_at, recover_timeout_s)
-    return (None if first is None else first - up_at), gap
+    first = probe.wait_for(DETECTIONS, up_at, recover_timeout_s)
+    # The routers' reconnection after the return is part of the outage too.
+    probe.wait_for(DEPTH, up_at + 3.0, 10.0)
+    gap, at = probe.max_gap(DEPTH, down_at, max(time.monotonic(), up_at + 3.0))
+    return (None if first is None else first - up_at), gap, at
