@@ -231,3 +231,42 @@ def test_box_finder_keeps_support_and_ids():
     assert sorted(ids) == [0, 1, 2]
     for box in second.boxes:
         assert math.dist(ids[box.id], box.centre) < 0.003
+
+
+def test_pallet_cartons_measured_from_the_pallet():
+    """Cartons of three heights on a pallet, D435 noise: each carton's own height and centre,
+    the pallet's visible strip never a box."""
+    rng = np.random.default_rng(1)
+    pallet = box_on(Plane(), 0.0, 0.0, (1.2, 1.0, 0.15), 0.0, (120, 90, 60))
+    cartons = []
+    for row in range(3):
+        for col in range(4):
+            size = (0.28, 0.3 if row == 1 else 0.25, (0.2, 0.3, 0.25)[(row + col) % 3])
+            colour = tuple(int(v) for v in rng.integers(120, 220, 3))
+            cartons.append(
+                box_on(pallet, (col - 1.5) * 0.285, (row - 1) * 0.3, size, 0.0, colour)  # type: ignore[arg-type]
+            )
+    camera = Camera.tilted(2.0, 10.0, width=640, height=480, hfov_deg=56.0)
+    depth, colour = render(Scene(camera, Plane(), (pallet, *cartons)))
+    noisy = add_noise(depth, Noise.d435(), rng)
+    found = find_boxes(noisy, camera.lens, camera.camera_to_world, colour)
+    assert len(found.boxes) == len(cartons)
+    for box, true in match(found.boxes, tuple(cartons)):
+        assert math.dist(box.centre, true.centre) <= 0.010
+        assert box.size[2] == pytest.approx(true.size[2], abs=0.005)
+        assert box.size[0] == pytest.approx(max(true.size[:2]), abs=0.015)
+        assert box.size[1] == pytest.approx(min(true.size[:2]), abs=0.015)
+
+
+def test_large_picture_read_at_every_second_pixel():
+    """1280 x 720 is read as 640 x 360 (the lens scaled exactly): noise-free answers hold."""
+    rng = np.random.default_rng(3)
+    truth = random_boxes(rng, 4, 0.15)
+    camera = Camera.tilted(0.8, 20.0, width=1280, height=720)
+    depth, colour = render(Scene(camera, Plane(), truth))
+    found = find_boxes(depth, camera.lens, camera.camera_to_world, colour)
+    assert len(found.boxes) == len(truth)
+    for box, true in match(found.boxes, truth):
+        assert math.dist(box.centre, true.centre) <= 0.0025 * 0.8
+        assert abs(box.size[0] - max(true.size[:2])) <= 0.004
+        assert abs(box.size[2] - true.size[2]) <= 0.001

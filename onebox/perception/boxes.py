@@ -9,27 +9,41 @@ pose and in the optical frame without one ("up" is then the support normal, towa
 :class:`BoxFinder` does the same for a stream, keeping the support while it still fits and
 giving each box an id that stays while the box does not move. No I/O here.
 
-How a picture is read:
+How a picture is read (whole-array work; Python loops only over tops, a few scalars each):
 
+0. Pictures larger than ``max_pixels`` (default 640 x 480) are read at every k-th pixel, the
+   lens scaled exactly (1280 x 720 is read as 640 x 360).
 1. The support (:mod:`onebox.perception.support`): the lowest large plane facing up.
 2. Heights above it for every pixel, one multiply-add (``depth * slope + offset``, the slope
    cached per lens and plane); only the rows and columns holding standing pixels go further.
 3. Standing pixels split into pieces at height steps and colour edges
-   (:mod:`onebox.perception.segment`); each piece's flat top is the pixels within 3 sigma(z)
-   (at least 1.5 mm) of its highest common height, grown back into the cut pixels.
-4. Each top becomes a rectangle in the support plane (:mod:`onebox.perception.rectangle`),
-   edges that something nearer hides are left out of the fit.
+   (:mod:`onebox.perception.segment`). Every piece's top height at once: the fullest window of
+   a per-piece height histogram (window = the tolerance, 3 sigma(z), at least 1.5 mm), then the
+   mean of the readings within the tolerance. Tops grow back into cut pixels and small pieces
+   at their height (3 pixels, the larger top first).
+4. All tops measured together from their grouped pixels: area (holes filled by each row's and
+   column's span), the top's plane (moments on a sample), the outline and, for each outline
+   pixel, what lies past it: rising (hidden by something standing on or in front of the top),
+   dropping (a real edge) or no reading (dropout). Every rectangle is fitted in one batched
+   pass (:func:`onebox.perception.rectangle.fit_rectangles`).
 5. Not a box: a top touching the picture's border (cut off), smaller than ``min_top_area_m2``,
    not parallel to the support, not flat, filling less than ``min_score`` of its rectangle
    (a disc fills pi/4), or curved: loosening the height tolerance four-fold widens a curved
    top (cylinder, ball) but not a box's, whose sides drop straight down.
-6. What each box stands on: the surface directly under it. Points just outside each side of
-   its rectangle, at the height of each lower plateau (and of the support), are looked up in
-   the picture; the highest level seen there on at least 40 % of the visible sides is what it
-   stands on (another box: ``on`` is its index; a pallet or table top: that plateau). A box
-   hemmed in by touching boxes takes the level of its touching neighbours; otherwise the
-   highest plateau that is not a box top seen around it, else the support. The height is the
-   distance from its top to that level, so cartons on a pallet are carton-sized.
+6. What each box stands on. Lines of probe points go out from each side at the height of each
+   lower level (the support and every lower top); along each line the first surface seen (not
+   the box itself, nothing higher in front) says whether the level is there or lower. A level
+   counts when seen on two probes with hardly anything lower seen, or on two opposite sides;
+   a lower top counts only if it reaches under the box (its rectangle holds the box's middle,
+   it is no box, or the box lies past one of its hidden sides). The highest such level is the
+   base; a box that sees none takes the base most of its touching neighbours have, else the
+   platform it stands over, else the support. A top that boxes stand on past its hidden side,
+   or that is mostly covered, is a platform (a pallet's top): a level, never reported as a
+   box. On a platform, a side in the shadow of a taller carton between it and the camera runs
+   halfway into the shadow (packed cartons touch; the shadow's middle is never off by more
+   than half of it).
+7. The height is the top's distance from its base; the centre is the rectangle's middle less
+   half the height along the normal.
 """
 
 from __future__ import annotations
@@ -83,7 +97,7 @@ class FinderSettings:
     """A box's top is parallel to the surface under it within this angle."""
     max_curvature_growth: float = 1.3
     """A top whose footprint grows more than this when the tolerance is loosened is curved."""
-    colour_step: float = 28.0
+    colour_step: float = 12.0
     """A brightness step (0..255) between neighbours that separates two touching tops."""
     keep_cut_off: bool = False
     """Report tops cut off by the picture's border (their size is then a lower bound)."""
@@ -472,8 +486,9 @@ def _spans(
     key = top.astype(np.int64) * (int(lines.max()) + 1) + lines
     first = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
     last = np.r_[first[1:] - 1, len(key) - 1]
-    result: Float64Array = np.bincount(
-        top[first], weights=(along[last] - along[first] + 1).astype(np.float64), minlength=count
+    spans = (along[last] - along[first] + 1).astype(np.float64)
+    result: Float64Array = np.bincount(top[first], weights=spans, minlength=count).astype(
+        np.float64
     )
     return result
 
@@ -821,7 +836,8 @@ def _bases(
     level_h = np.array([0.0] + [p.height_m for p in plateaus])
     support_tol = 3.0 * float(support.sigma_at(support.distance_m))
     level_tol = np.maximum(np.array([support_tol] + [p.tolerance_m for p in plateaus]), 0.004)
-    level_label = np.array([-1] + [p.label for p in plateaus])
+    label_height = np.full(max(p.label for p in plateaus) + 1, np.nan)
+    label_height[[p.label for p in plateaus]] = [p.height_m for p in plateaus]
     probes = np.stack([_probes(box) for box in boxes])  # boxes x lines x reaches x 2
     # Camera-frame probe points at every level: a e1 + b e2 + (level - offset) n.
     shape = (-1, 1, 1, 1, 1)
@@ -842,7 +858,6 @@ def _bases(
     own = np.array([b.label for b in boxes]).reshape(1, -1, 1, 1)
     lh = level_h.reshape(shape[:-1])
     lt = level_tol.reshape(shape[:-1])
-    ll = level_label.reshape(shape[:-1])
     # Along each line the first point whose surface is seen (a reading, not the box itself,
     # nothing higher in front of it) tells whether the level is there or lower.
     with np.errstate(invalid="ignore"):
@@ -852,7 +867,10 @@ def _bases(
         h_first = np.take_along_axis(seen_h, first, -1)[..., 0]
         label_first = np.take_along_axis(seen_label, first, -1)[..., 0]
         match = any_known & (np.abs(h_first - lh[..., 0]) < lt[..., 0])
-        match &= (label_first == -1) | (label_first == ll[..., 0])
+        # The level's own top, or any top at its height (one carton's top seen on both
+        # sides of the box across it is two pieces), or no top (the support, a fragment).
+        top_h = np.append(label_height, np.nan)[np.where(label_first >= 0, label_first, -1)]
+        match &= (label_first < 0) | (np.abs(top_h - lh[..., 0]) < lt[..., 0])
         lower = any_known & (h_first < lh[..., 0] - lt[..., 0])
     matches, lowers = match.sum(axis=2), lower.sum(axis=2)
     box_h = np.array([b.height_m for b in boxes])
@@ -863,8 +881,11 @@ def _bases(
         for i, box in enumerate(boxes):
             if allowed[j, i]:
                 allowed[j, i] = _reaches_under(level, box)
-    # A level counts when it is seen on at least two probes and hardly anything lower is.
-    seen_ok = allowed & (matches >= 2) & (matches >= 0.75 * (matches + lowers))
+    # A level counts when it is seen on at least two probes and hardly anything lower is, or
+    # on two opposite sides (a box across a narrower one: past its other sides lies lower).
+    per_side = match.reshape(*match.shape[:2], 4, -1).sum(axis=3) >= 2
+    across = (per_side[..., 0] & per_side[..., 1]) | (per_side[..., 2] & per_side[..., 3])
+    seen_ok = allowed & (matches >= 2) & ((matches >= 0.75 * (matches + lowers)) | across)
     base: dict[int, int] = {}
     for i in range(len(boxes)):
         ok = np.flatnonzero(seen_ok[:, i])
@@ -1033,10 +1054,10 @@ def _quaternion(m: Float64Array) -> Float64Array:
         q[i] = big
         q[j] = (m[j, i] + m[i, j]) / (4 * big)
         q[k] = (m[k, i] + m[i, k]) / (4 * big)
-    result = np.asarray(q)
+    result: Float64Array = np.asarray(q, dtype=np.float64)
     if result[3] < 0:
         result = -result
-    return result / np.linalg.norm(result)
+    return result / float(np.linalg.norm(result))
 
 
 def _vec(v: Float64Array) -> Vec3:

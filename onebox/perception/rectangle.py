@@ -1,20 +1,20 @@
 """The rectangle around a box's top: orientation, sides and a footprint-corrected size.
 
-Contract: :func:`fit_rectangle` takes the top's pixel centres as 2-D points in the support
-plane (metres), which of them lie on the top's outline (and which of those are hidden edges,
-where something nearer occludes the top), each pixel's footprint area on the top (and
-optionally the top's whole area, when something standing on it hides part) and returns a
-:class:`Rectangle`, or None for fewer than three distinct points.
+Contract: :func:`fit_rectangles` takes every top's outline points as 2-D points in the
+support plane (metres), grouped by top, with what lies past each point (hidden: the surface
+rises; drop: it falls; unsure: no reading), each top's row ends (a superset of its hull), its
+pixel footprint and its area (holes filled), and returns one :class:`Rectangle` (or None)
+per top. All tops are fitted together, whole-array.
 
-- The smallest-area rectangle around the outline's convex hull (rotating calipers) gives a
-  first orientation; a joint least-squares fit of the four sides (two directions at right
-  angles, one shared angle) to the visible outline pixels refines it well below the pixel
-  grid's staircase.
-- Outline pixel centres lie inside the true edge by between 0 and one pixel footprint,
-  depending on the edge's angle to the pixel grid and on noise eating the edge. The summed
-  pixel footprints are an unbiased estimate of the top's true area, so the margin that makes
-  the rectangle's area equal it is added to both sides (clamped to 0..2 footprints). When a
-  side is hidden the area says nothing and one footprint is added instead.
+- The smallest-area rectangle around each top's row ends: every 2 degrees, then every 0.1
+  around the best; one joint least-squares step of the four sides (one shared small angle,
+  the four offsets eliminated in closed form) refines it below the pixel grid's staircase.
+- Each side's position is the trimmed mean (outermost 80 %) of its visible outline points
+  within four footprints of the side. A side mostly hidden, or with too few points, is
+  bounded by the farthest pixel instead.
+- Outline pixel centres lie inside the true edge by between 0 and one pixel footprint. When
+  all four sides are fitted, the margin that makes the rectangle's area equal the top's
+  area (an unbiased estimate) is added (clamped to 0..2 footprints); otherwise one footprint.
 """
 
 from __future__ import annotations
@@ -71,7 +71,7 @@ def _group_extent(
 
 def fit_rectangles(
     edge: Float64Array,
-    group: npt.NDArray[np.intp],
+    group: npt.NDArray[np.integer],
     hidden: BoolArray,
     hull_points: BoolArray,
     unsure: BoolArray,
