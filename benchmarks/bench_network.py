@@ -7,6 +7,19 @@ network namespaces) hosts that lose their link.
 ``shm``: a depth picture (32FC1) sent from one client to another through a private router,
 p50 and p95 publish -> callback, with Zenoh's shared-memory transport on and off, and what
 /dev/shm and the router's RSS hold afterwards.
+
+``hosts`` (benchmarks/netlab.py): three hosts A, B, C in network namespaces, a router each in a
+full mesh (no host's traffic to another passes through a third); the sim on A, the locator on B,
+a probe subscriber on C. First B's link is taken down ``--down-s`` (15 s) ``--runs`` times:
+the time from its return to the first detection at C, and the longest gap in the depth
+pictures A sends C from the link going down to 3 s after its return. Then, in a new lab, B's
+two links (B -> A and C -> B) go through a TCP proxy that delays every chunk it forwards by
+20 ms and, for 5 % of the chunks (chosen at random, seeded), by a further 200 ms, keeping the
+order: TCP loses no bytes, a lost segment costs a stall of one retransmission timeout (200 ms is
+Linux's least), and everything behind it waits. Over ``--loss-s`` (60 s) the captures are the
+ground-truth stamps that reach C (A -> C is direct and clean); a capture is detected when a
+detection with its stamp reaches C. ``--only outage|loss`` runs one half. The load average is
+printed: the figures are from a shared machine.
 """
 
 from __future__ import annotations

@@ -11,7 +11,13 @@ share /dev/shm; with shared memory on they would not travel at all).
 
 :class:`LossyProxy` forwards TCP between two routers with a delay and "loss": TCP never loses
 bytes, a lost segment is retransmitted after the retransmission timeout (Linux's least is
-200 ms), so loss is emulated as that stall on 5 % of the chunks forwarded.
+200 ms), so loss is emulated as that stall: every chunk read (up to 64 KiB) is sent on
+``delay_s`` later, and a random ``loss`` of them ``stall_s`` later still, in order (a chunk
+never overtakes the one before it, so everything behind a stall waits, as behind a lost
+segment). The proxy buffers without bound: it never pushes back on the router.
+
+Every process writes its output to its own file in a temporary folder, removed on exit unless
+``ONEBOX_NETLAB_LOGS`` is set (then its path is printed).
 """
 
 from __future__ import annotations

@@ -11,9 +11,10 @@
 - ``latched=True`` publishers keep their last sample in a Zenoh publication cache and
   ``history=True`` subscribers ask for it, so a late joiner still receives ``tf_static``.
 - Quality of service follows the message type (:func:`qos`): a picture (Image, PointCloud) is
-  worth nothing late, so it is dropped under congestion, sent at once and at low priority;
+  worth nothing late, so it is dropped under congestion and sent at once (express);
   everything else (detections, tf_static, clock, camera info, ...) is small and blocks rather
-  than drops. config/router.json5 bounds how long a stalled link may block the router.
+  than drops. config/router.json5 bounds how long a stalled link may block the router, and
+  has routers drop a capture's camera info and pose rather than wait on a full queue.
 - A namespace is a plain key prefix (:func:`check_namespace`); a sample on a wildcard key is
   logged and dropped, never delivered as if it were on the subscribed key.
 - Every process logs losing and regaining its router (:class:`RouterWatch`).
@@ -165,8 +166,9 @@ def qos(message_type: type[Message]) -> Qos:
     A picture late is worth nothing, and a stalled link must not hold up anything else: it
     goes out at once (express) and is dropped when its queue stays full. It keeps the data
     priority of the rest of its capture, so a capture's messages arrive in the order they were
-    sent (ground truth last); between hosts the routers move pictures to the lowest data
-    priority (config/router.json5), where small reliable messages overtake them.
+    sent (ground truth last). Routers drop camera info and pose, which also come with every
+    capture, rather than wait on a full queue (config/router.json5), so that one host's
+    stalled link never holds a router's fan-out to the others.
     """
     return PICTURE_QOS if issubclass(message_type, PICTURE_TYPES) else RELIABLE_QOS
 

@@ -30,7 +30,8 @@ def test_a_host_that_drops_off_for_15_s_comes_back_and_stalls_nobody(lab: netlab
         for run in range(2):
             recovered_s, gap_s, at_s = netlab.outage(lab, probe, "b", down_s=15.0)
             assert recovered_s is not None, f"run {run}: no detection at C after B came back"
-            # The sim sends 5 a second; a stall of the fan-out would show as seconds here.
-            assert gap_s < 2.0, (
+            # The sim sends 5 a second (0.2 s apart); the benchmark's worst over 20 outages is
+            # about half a second. A fan-out held by B's dead link showed as 0.7 to 10 s here.
+            assert gap_s < 1.0, (
                 f"run {run}: A -> C depth stopped {gap_s:.1f} s, {at_s:.1f} s into B's outage"
             )
