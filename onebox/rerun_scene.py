@@ -10,8 +10,8 @@ One :class:`SceneLog` turns each message into Rerun archetypes on one recording,
 - ``world/camera``: the camera at its pose (``camera/pose``, world -> camera_optical_frame, or,
   until a pose arrives, the chain on ``tf_static`` to the pictures' frame);
   ``world/camera/image`` the pinhole (``camera/camera_info``), with ``.../rgb`` the colour
-  picture (JPEG) and ``.../depth`` the depth picture under it, which Rerun back-projects into
-  the 3D view; ``world/camera/points`` the point cloud, thinned, only when asked for;
+  picture (JPEG in a saved recording, raw pixels live) and ``.../depth`` the depth picture
+  under it; ``world/camera/points`` the point cloud, thinned, only when asked for;
 - ``world/detections``: each detected box as an oriented see-through box labelled with its id,
   size in millimetres and yaw; ``world/support`` the plane the boxes stand on, a translucent
   patch; ``world/ground_truth`` the simulator's true boxes, as thin green wireframes.
@@ -104,8 +104,10 @@ def blueprint(camera: str = "camera") -> rrb.Blueprint:
             rrb.Spatial3DView(
                 name="3D",
                 origin=WORLD,
-                # The depth picture under the pinhole is back-projected into 3D by Rerun.
-                contents=["$origin/**"],
+                # Not the depth picture back-projected (76,800 points a capture): a
+                # software-rendered browser drew the page at 0.3 frames a second with it and
+                # 1 to 3 without (benchmarks/bench_live_view.py). --points draws a thinned cloud.
+                contents=["$origin/**", "- $origin/camera/image/depth"],
                 eye_controls=rrb.EyeControls3D(
                     position=[0.36, -0.5, 0.42], look_target=[0.0, 0.02, 0.13], eye_up=[0, 0, 1]
                 ),
@@ -236,6 +238,10 @@ class SceneLog:
     ``points``: draw camera/points too (thinned to every :data:`POINTS_STRIDE` th point, at
     most once per :data:`POINTS_INTERVAL_NS`); off by default, as the depth picture under the
     pinhole already shows the same points.
+
+    ``jpeg``: send the colour picture as JPEG (a saved recording: a tenth of the bytes). Live,
+    raw pixels: the web viewer decodes a JPEG after the frame that shows it, and with a new
+    picture five times a second a software-rendered page showed only its loading spinner.
     """
 
     def __init__(
@@ -246,6 +252,7 @@ class SceneLog:
         table_z_m: float | None = 0.0,
         table_size_m: float = 1.0,
         points: bool = False,
+        jpeg: bool = True,
     ) -> None:
         self.rec = recording
         self.camera = camera
@@ -253,6 +260,7 @@ class SceneLog:
         self._table_z_m = 0.0 if table_z_m is None else table_z_m
         self._table_size_m = table_size_m
         self._points = points
+        self._jpeg = jpeg
         self._last_points_ns: int | None = None
         self._last_info: tuple[tuple[float, ...], int, int] | None = None
         self._static: dict[str, TransformStamped] = {}
@@ -315,9 +323,10 @@ class SceneLog:
             rgb = pictures.rgb(message)
             self._pose_from_tf(message.header.frame_id)
             self._time(message.header.stamp_ns)
+            picture = rr.Image(rgb, color_model="RGB")
             self.rec.log(
                 f"{self._cam}/image/rgb",
-                rr.Image(rgb, color_model="RGB").compress(jpeg_quality=JPEG_QUALITY),
+                picture.compress(jpeg_quality=JPEG_QUALITY) if self._jpeg else picture,
             )
             return "colour"
         if isinstance(message, Image) and rest == "depth/image_raw":

@@ -1,9 +1,9 @@
 """Show the running system in Rerun, live: the seed's RViz.
 
 Reads (under the namespace), for the camera named by --camera (default ``camera``):
-  CAMERA/image_raw        Image rgb8           the colour picture (sent to Rerun as JPEG), 5 Hz
-  CAMERA/depth/image_raw  Image 32FC1          the depth picture (near bright), back-projected
-                                               into 3D by Rerun under the pinhole
+  CAMERA/image_raw        Image rgb8           the colour picture (JPEG in --save), 5 Hz
+  CAMERA/depth/image_raw  Image 32FC1          the depth picture (near bright), under the
+                                               pinhole (the 3D view leaves it out: --points)
   CAMERA/camera_info      CameraInfo           the lens, drawn as a pinhole (static)
   CAMERA/pose             TransformStamped     world -> camera_optical_frame, with each capture
   CAMERA/points           PointCloud           checked; drawn (thinned, 1 Hz) only with --points
@@ -180,7 +180,9 @@ def main(args: argparse.Namespace) -> int:
     complete = 0
     started = time.monotonic()
     with bus.open_bus(args) as b, rerun_sink.open_recording(sink) as rec:
-        scene = rerun_scene.SceneLog(rec, camera=s.camera, table_z_m=s.table_z_m, points=s.points)
+        scene = rerun_scene.SceneLog(
+            rec, camera=s.camera, table_z_m=s.table_z_m, points=s.points, jpeg=args.save is not None
+        )
         scene.start()
 
         def on_message(key: str, message: Message) -> None:
