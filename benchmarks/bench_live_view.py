@@ -123,6 +123,9 @@ function viewerState(bytes) {
   return out;
 }
 
+// A page too busy to answer within 5 s is recorded as not answering, and the watch goes on.
+const within = (promise, ms) => Promise.race([promise, new Promise((_, no) => setTimeout(() => no(new Error(`no answer in ${ms / 1000} s`)), ms))]);
+
 (async () => {
   const browser = await chromium.launchPersistentContext(profile, {
     executablePath: '/usr/bin/chromium',
@@ -142,29 +145,29 @@ function viewerState(bytes) {
   await cdp.send('Performance.enable');
   const t0 = Date.now();
   console.log(JSON.stringify({ event: 'open', wall: Date.now() / 1000 }));
-  await page.goto(url, { timeout: 120000 });
+  try { await page.goto(url, { timeout: 60000 }); } catch (e) { console.log(JSON.stringify({ event: 'goto', error: String(e).slice(0, 200) })); }
   const end = t0 + Number(watchS) * 1000;
   let lastFrames = 0, lastT = Date.now(), nextShot = t0 + Number(shotEveryS) * 1000, n = 0;
   for (;;) {
     const now = Date.now();
     const row = { t: (now - t0) / 1000, wall: now / 1000 };
     try {
-      const raw = await page.evaluate(() => window._handle ? Array.from(window._handle.viewer_state()) : null);
+      const raw = await within(page.evaluate(() => window._handle ? Array.from(window._handle.viewer_state()) : null), 5000);
       row.state = raw ? viewerState(Uint8Array.from(raw)) : null;
       row.wall = Date.now() / 1000;  // when the state was read
-      const frames = await page.evaluate(() => window.__frames);
+      const frames = await within(page.evaluate(() => window.__frames), 5000);
       row.fps = (frames - lastFrames) / Math.max((Date.now() - lastT) / 1000, 1e-3);
       lastFrames = frames; lastT = Date.now();
     } catch (e) { row.error = String(e).slice(0, 200); }
     try {
-      const m = await cdp.send('Performance.getMetrics');
+      const m = await within(cdp.send('Performance.getMetrics'), 5000);
       row.heap = (m.metrics.find(x => x.name === 'JSHeapUsedSize') || {}).value;
     } catch (e) {}
     const last = now >= end;
     if (last || now >= nextShot) {
       nextShot = now + Number(shotEveryS) * 1000;
       try {
-        const s = await cdp.send('Page.captureScreenshot', { format: 'png' });
+        const s = await within(cdp.send('Page.captureScreenshot', { format: 'png' }), 30000);
         row.shot = `${shots}/page_${String(n++).padStart(3, '0')}_${row.t.toFixed(0)}s.png`;
         fs.writeFileSync(row.shot, Buffer.from(s.data, 'base64'));
       } catch (e) { row.shot_error = String(e).slice(0, 200); }
@@ -173,7 +176,8 @@ function viewerState(bytes) {
     if (last) break;
     await new Promise(r => setTimeout(r, Math.max(0, 1000 - (Date.now() - now))));
   }
-  await browser.close();
+  await within(browser.close(), 10000).catch(() => {});
+  process.exit(0);
 })();
 """
 
@@ -393,6 +397,7 @@ def main() -> None:
                             if sample.get("shot")
                             else ""
                         )
+                        + (f"  page: {sample['error']}" if sample.get("error") else "")
                         + (
                             f"  [{'; '.join(sample['problems'])[:120]}]"
                             if sample["problems"]
