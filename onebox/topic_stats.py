@@ -13,13 +13,19 @@ thread that prints; :func:`rate` and :func:`bandwidth` are the sums, and :func:`
 
 from __future__ import annotations
 
+import argparse
 import collections
 import itertools
+import logging
 import math
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+
+from onebox import bus
+from onebox.describe import key_expression
+from onebox.errors import SettingError
 
 DEFAULT_WINDOW = 10_000
 """Messages kept per key, as ``ros2 topic hz`` keeps by default."""
@@ -188,3 +194,61 @@ def report_until(
             out(f"{key}\n{figures}" if named else figures)
         if duration_s is not None and now - start_s >= duration_s:
             return
+
+
+Figures = Callable[[list[tuple[float, int]], float], str | None]
+"""Turns a window's (arrival time, size) items and the time now into the printed figures."""
+
+
+def add_arguments(parser: argparse.ArgumentParser, default_window: int) -> None:
+    """The flags ``onebox hz`` and ``onebox bw`` share."""
+    parser.add_argument("key", metavar="KEY", help="the key or key expression to measure")
+    parser.add_argument(
+        "--window",
+        "-w",
+        type=int,
+        default=default_window,
+        help=f"how many of the newest messages the figures cover (default {default_window}, "
+        "as ros2)",
+    )
+    parser.add_argument(
+        "--duration-s", type=float, help="stop after this many seconds (default: until Ctrl-C)"
+    )
+    bus.add_arguments(parser)
+
+
+@dataclass(frozen=True)
+class WatchSettings:
+    """What ``onebox hz`` or ``onebox bw`` measures, and for how long."""
+
+    key: str
+    window: int
+    duration_s: float | None
+    period_s: float = 1.0
+
+    @classmethod
+    def from_args(cls, args: argparse.Namespace, min_window: int) -> WatchSettings:
+        if args.window < min_window:
+            raise SettingError(
+                f"--window {args.window}: must be {min_window} or more"
+                + (" (a rate needs two messages)" if min_window == 2 else "")
+            )
+        if args.duration_s is not None and args.duration_s <= 0:
+            raise SettingError(f"--duration-s {args.duration_s:g}: must be above 0")
+        return cls(key=key_expression(args.key), window=args.window, duration_s=args.duration_s)
+
+
+def watch(args: argparse.Namespace, settings: WatchSettings, figures: Figures, what: str) -> None:
+    """Subscribe to the key and print its figures every period until stopped."""
+    windows = KeyWindows(settings.window)
+    with bus.open_bus(args) as b:
+        b.subscribe_raw(settings.key, windows.on_sample)
+        logging.getLogger("topic").info("measuring the %s of %s", what, b.key(settings.key))
+        report_until(
+            windows,
+            figures,
+            period_s=settings.period_s,
+            duration_s=settings.duration_s,
+            name_keys="*" in settings.key,
+            out=lambda text: print(text, flush=True),
+        )
