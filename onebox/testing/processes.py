@@ -78,25 +78,6 @@ class Processes:
             self.stop(proc)
 
 
-def _run_router() -> Iterator[str]:
-    """Start ``onebox router`` on a free loopback port, yield its endpoint, stop it."""
-    port = free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
-    procs = Processes(endpoint)
-    proc = procs.start("router", "--listen", endpoint, connect=False)
-    deadline = time.monotonic() + 15
-    while True:
-        try:
-            with socket.create_connection(("127.0.0.1", port), timeout=0.2):
-                break
-        except OSError:
-            if proc.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError(f"router did not start: {procs.stop(proc)}") from None
-            time.sleep(0.05)
-    yield endpoint
-    procs.stop_all()
-
-
 @contextlib.contextmanager
 def private_router() -> Iterator[str]:
     """Start ``onebox router`` on a free loopback port, yield its endpoint, stop it."""
