@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import logging
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import msgspec
@@ -78,6 +79,12 @@ POINTS_STRIDE = 4
 """When the cloud is drawn, every 4th point of it: a 320 x 240 cloud becomes 19 200 points."""
 POINTS_INTERVAL_NS = 1_000_000_000
 """...and at most once a simulated second."""
+SAME = 1e-3
+"""A live pose, support plane or set of true boxes whose numbers (metres, quaternion terms) all
+changed by less than this since it was last sent is not sent again: 1 mm, about 0.1°."""
+SAME_PLANE = 5e-3
+"""...and for the found support plane, which moves a little with every capture's noise:
+5 mm, about 0.3° (each change is kept by the web server as static data)."""
 
 BOX_COLOUR = (0, 120, 255)
 TRUTH_COLOUR = (0, 200, 80)
@@ -223,6 +230,16 @@ def world_from_frame(
     return translation, rotation
 
 
+def shrink_rgb(rgb: npt.NDArray[np.uint8], n: int) -> npt.NDArray[np.uint8]:
+    """A colour picture ``n`` times smaller each way, each pixel the mean of its n x n block
+    (edge rows and columns that do not fill a block are left out)."""
+    if n <= 1:
+        return rgb
+    h, w = rgb.shape[0] // n * n, rgb.shape[1] // n * n
+    blocks = rgb[:h, :w].reshape(h // n, n, w // n, n, -1).astype(np.uint16)
+    return (blocks.mean(axis=(1, 3)) + 0.5).astype(np.uint8)
+
+
 def pinhole_matrix(k: list[float]) -> npt.NDArray[np.float64]:
     """A CameraInfo K (the middle of pixel u at u) as Rerun's pinhole, whose pixel u spans u
     to u + 1: the principal point moves half a pixel."""
@@ -230,6 +247,22 @@ def pinhole_matrix(k: list[float]) -> npt.NDArray[np.float64]:
     matrix[0, 2] += 0.5
     matrix[1, 2] += 0.5
     return matrix
+
+
+@dataclass(frozen=True)
+class Live:
+    """What a live page is sent, thinner than a recording: a software-rendered browser takes
+    data in only as fast as it draws (1 to 3 frames a second), so every message costs.
+
+    ``picture_hz``: the colour and depth pictures at most this often (simulated time; 0: every
+    one); the boxes still come with every capture. ``scale``: the pictures shrunk by this
+    factor (the lens with them). The camera's pose, the support plane and the true boxes are
+    sent only when they change, as static data: the one copy a late page gets, and kept by
+    the web server however much temporal data its memory limit drops.
+    """
+
+    picture_hz: float = 1.0
+    scale: int = 2
 
 
 class SceneLog:
@@ -242,6 +275,9 @@ class SceneLog:
     ``jpeg``: send the colour picture as JPEG (a saved recording: a tenth of the bytes). Live,
     raw pixels: the web viewer decodes a JPEG after the frame that shows it, and with a new
     picture five times a second a software-rendered page showed only its loading spinner.
+
+    ``live``: thin what is sent for a live page (:class:`Live`); None (a recording) keeps
+    every picture at full size and every pose, plane and true box on the timeline.
     """
 
     def __init__(
@@ -253,6 +289,7 @@ class SceneLog:
         table_size_m: float = 1.0,
         points: bool = False,
         jpeg: bool = True,
+        live: Live | None = None,
     ) -> None:
         self.rec = recording
         self.camera = camera
@@ -261,6 +298,14 @@ class SceneLog:
         self._table_size_m = table_size_m
         self._points = points
         self._jpeg = jpeg
+        self._live = live
+        self._scale = live.scale if live is not None and live.scale > 1 else 1
+        self._picture_interval_ns = (
+            round(1e9 / live.picture_hz) if live is not None and live.picture_hz > 0 else 0
+        )
+        self._last_picture_ns: dict[str, int] = {}
+        self._last_sent: dict[str, npt.NDArray[np.float64]] = {}
+        """Live: what the pose, support plane and true boxes were when last sent."""
         self._last_points_ns: int | None = None
         self._last_info: tuple[tuple[float, ...], int, int] | None = None
         self._static: dict[str, TransformStamped] = {}
@@ -323,7 +368,9 @@ class SceneLog:
             rgb = pictures.rgb(message)
             self._pose_from_tf(message.header.frame_id)
             self._time(message.header.stamp_ns)
-            picture = rr.Image(rgb, color_model="RGB")
+            if not self._picture_due("colour", message.header.stamp_ns):
+                return "colour"
+            picture = rr.Image(shrink_rgb(rgb, self._scale), color_model="RGB")
             self.rec.log(
                 f"{self._cam}/image/rgb",
                 picture.compress(jpeg_quality=JPEG_QUALITY) if self._jpeg else picture,
@@ -340,13 +387,14 @@ class SceneLog:
             rotation = unit_quaternion(t.rotation)
             self._have_pose = True
             self._time(message.header.stamp_ns)
+            translation = [t.translation.x, t.translation.y, t.translation.z]
+            if self._unchanged("pose", translation, list(rotation.xyzw)):
+                return "pose"
             self.rec.log(
                 self._cam,
-                rr.Transform3D(
-                    translation=[t.translation.x, t.translation.y, t.translation.z],
-                    quaternion=rotation,
-                ),
+                rr.Transform3D(translation=translation, quaternion=rotation),
                 rr.TransformAxes3D(AXIS_LENGTH_M),
+                static=self._live is not None,
             )
             return "pose"
         if isinstance(message, PointCloud) and rest == "points":
@@ -375,8 +423,36 @@ class SceneLog:
         check_stamp(stamp_ns)
         self.rec.set_time(TIMELINE, duration=np.timedelta64(stamp_ns, "ns"))
 
+    def _picture_due(self, kind: str, stamp_ns: int) -> bool:
+        """Live: whether this picture is sent (at most one per interval of simulated time; a
+        stamp that goes back, a restarted sim, starts the count again)."""
+        last = self._last_picture_ns.get(kind)
+        if last is not None and 0 <= stamp_ns - last < self._picture_interval_ns:
+            return False
+        self._last_picture_ns[kind] = stamp_ns
+        return True
+
+    def _unchanged(self, what: str, *values: Any, within: float = SAME) -> bool:
+        """Live: whether ``values`` are what was last sent for ``what`` (each within
+        ``within``); if not, they become the last sent. A recording sends everything."""
+        if self._live is None:
+            return False
+        now = np.concatenate([np.ravel(np.asarray(v, dtype=np.float64)) for v in values])
+        last = self._last_sent.get(what)
+        if last is not None and last.shape == now.shape and np.all(np.abs(last - now) < within):
+            return True
+        self._last_sent[what] = now
+        return False
+
     def _depth(self, message: Image) -> None:
         depth = pictures.depth_m(message)
+        self._pose_from_tf(message.header.frame_id)
+        self._time(message.header.stamp_ns)
+        if not self._picture_due("depth", message.header.stamp_ns):
+            return
+        # Every scale-th reading: an average would mix near and far at an edge.
+        n = self._scale
+        depth = depth[: depth.shape[0] // n * n : n, : depth.shape[1] // n * n : n]
         with np.errstate(invalid="ignore"):
             valid = depth[np.isfinite(depth) & (depth > 0)]
         # Colour the readings this picture has, near bright (yellow), far dark, as `onebox pixels`
@@ -388,8 +464,6 @@ class SceneLog:
         # for Rerun and for a 16UC1 picture.
         with np.errstate(invalid="ignore"):
             mm = np.where(np.isfinite(depth) & (depth > 0), depth * 1000.0 + 0.5, 0.0)
-        self._pose_from_tf(message.header.frame_id)
-        self._time(message.header.stamp_ns)
         self.rec.log(
             f"{self._cam}/image/depth",
             rr.DepthImage(
@@ -413,12 +487,16 @@ class SceneLog:
         if lens == self._last_info:
             return
         self._last_info = lens
+        # Shrunk pictures (live) are under a lens shrunk with them: Rerun's pixel u spans u to
+        # u + 1, so pixel u of a picture shrunk n times spans n u to n (u + 1) of the full one.
+        matrix = pinhole_matrix(info.k)
+        matrix[:2] /= self._scale
         # Static: a late viewer, or one that dropped old data, must still have the lens.
         self.rec.log(
             f"{self._cam}/image",
             rr.Pinhole(
-                image_from_camera=pinhole_matrix(info.k),
-                resolution=[info.width, info.height],
+                image_from_camera=matrix,
+                resolution=[info.width // self._scale, info.height // self._scale],
                 camera_xyz=rr.ViewCoordinates.RDF,
                 image_plane_distance=IMAGE_PLANE_M,
             ),
@@ -545,6 +623,8 @@ class SceneLog:
         self._time(message.header.stamp_ns)
         tilt = "" if message.tilt_deg is None else f", tilt {message.tilt_deg:.1f}°"
         entity = SUPPORT if message.header.frame_id in ("", WORLD_FRAME) else f"{self._cam}/support"
+        if self._unchanged(entity, n, message.offset_m, within=SAME_PLANE):
+            return
         self.rec.log(
             entity,
             rr.Mesh3D(
@@ -553,6 +633,7 @@ class SceneLog:
                 albedo_factor=SUPPORT_COLOUR,
             ),
             rr.AnyValues(label=f"support {message.inlier_share:.0%} inliers{tilt}"),
+            static=self._live is not None,
         )
 
     def _ground_truth(self, message: GroundTruth) -> None:
@@ -567,8 +648,10 @@ class SceneLog:
             truth.append((message.box_pose, message.box_size))
         centres, sizes, quats = self._boxes(truth)
         self._time(message.header.stamp_ns)
+        if self._unchanged(GROUND_TRUTH, centres, sizes, [q.xyzw for q in quats]):
+            return
         if not truth:
-            self.rec.log(GROUND_TRUTH, rr.Clear(recursive=True))
+            self.rec.log(GROUND_TRUTH, rr.Clear(recursive=True), static=self._live is not None)
             return
         self.rec.log(
             GROUND_TRUTH,
@@ -579,4 +662,5 @@ class SceneLog:
                 colors=[TRUTH_COLOUR],
                 radii=rr.Radius.ui_points(0.75),
             ),
+            static=self._live is not None,
         )

@@ -115,6 +115,8 @@ def web_server(grpc_port: int, web_port: int, memory_limit: str) -> Iterator[str
         str(web_port),
         "--server-memory-limit",
         memory_limit,
+        # A page that joins late is sent the newest data first, then what the limit kept.
+        "--newest-first",
     ]
     proc = subprocess.Popen(
         cmd,
@@ -153,7 +155,7 @@ class Sink:
     """0: 9876 if free, else any free port."""
     web_port: int = 0
     """0: 9090 if free, else any free port."""
-    memory_limit: str = "16MiB"
+    memory_limit: str = "4MiB"
     """What the web server keeps for browsers that join late; static data is always kept."""
     overwrite: bool = False
     """Replace an existing --save file."""

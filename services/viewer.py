@@ -1,7 +1,7 @@
 """Show the running system in Rerun, live: the seed's RViz.
 
 Reads (under the namespace), for the camera named by --camera (default ``camera``):
-  CAMERA/image_raw        Image rgb8           the colour picture (JPEG in --save), 5 Hz
+  CAMERA/image_raw        Image rgb8           the colour picture (JPEG in --save)
   CAMERA/depth/image_raw  Image 32FC1          the depth picture (near bright), under the
                                                pinhole (the 3D view leaves it out: --points)
   CAMERA/camera_info      CameraInfo           the lens, drawn as a pinhole (static)
@@ -18,8 +18,12 @@ Where it shows them:
   - without one: a web viewer served on loopback (a ``rerun --serve-web`` child process); the
     address to open is printed. Its ports are settings (GRPC_PORT, WEB_PORT); left at 0 they
     are 9876 and 9090 when free and any free ports otherwise, so a second pipeline's viewer
-    starts beside the first. The server keeps --memory-limit of data for late browsers;
-    what never changes (lens, tf_static, table) is static and always kept;
+    starts beside the first. The server keeps --memory-limit of data for late browsers and
+    sends a late page the newest first; what never changes (lens, tf_static, table) and the
+    newest pose, support plane and true boxes are static and always kept. A live page gets the
+    pictures at most --picture-hz times a second, --picture-scale times smaller, and the
+    boxes with every capture: a software-rendered browser takes data in only as fast as it
+    draws, so every message costs;
   - --save FILE.rrd: a recording instead, which ``rerun FILE.rrd`` opens later (refused if it
     exists, unless --overwrite; nothing is left behind on failure).
 The layout is the seed's config/one_box.rviz: the 3D view beside the colour and depth pictures.
@@ -83,9 +87,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     settings.add(
         parser,
         "memory_limit",
-        "16MiB",
+        "4MiB",
         "what the web server replays to a browser that joins late (static data is always kept); "
         "small, so a late page catches up in seconds",
+    )
+    settings.add(
+        parser,
+        "picture_hz",
+        1.0,
+        "live: send the colour and depth pictures at most this often (the boxes come with every "
+        "capture; 0: every picture); --save keeps every one",
+    )
+    settings.add(
+        parser,
+        "picture_scale",
+        2,
+        "live: shrink the pictures this many times each way (1: full size); --save keeps all",
     )
     parser.add_argument(
         "--points", action="store_true", help="also draw camera/points (thinned, once a second)"
@@ -150,6 +167,8 @@ class ViewerSettings:
     camera: str
     table_z_m: float | None
     points: bool
+    live: rerun_scene.Live | None
+    """What a live page is sent; None for --save, which keeps everything."""
     frames: int | None
     duration_s: float | None
 
@@ -169,6 +188,9 @@ def main(args: argparse.Namespace) -> int:
         camera=args.camera,
         table_z_m=args.table_z,
         points=args.points,
+        live=None
+        if args.save is not None
+        else rerun_scene.Live(picture_hz=args.picture_hz, scale=max(1, args.picture_scale)),
         frames=args.frames,
         duration_s=args.duration_s,
     )
@@ -181,7 +203,12 @@ def main(args: argparse.Namespace) -> int:
     started = time.monotonic()
     with bus.open_bus(args) as b, rerun_sink.open_recording(sink) as rec:
         scene = rerun_scene.SceneLog(
-            rec, camera=s.camera, table_z_m=s.table_z_m, points=s.points, jpeg=args.save is not None
+            rec,
+            camera=s.camera,
+            table_z_m=s.table_z_m,
+            points=s.points,
+            jpeg=args.save is not None,
+            live=s.live,
         )
         scene.start()
 
