@@ -270,3 +270,48 @@ def test_large_picture_read_at_every_second_pixel():
         assert math.dist(box.centre, true.centre) <= 0.0025 * 0.8
         assert abs(box.size[0] - max(true.size[:2])) <= 0.004
         assert abs(box.size[2] - true.size[2]) <= 0.001
+
+
+@pytest.mark.parametrize(("distance_m", "tilt_deg"), [(1.0, 20.0), (0.8, 0.0)])
+def test_box_nearly_covering_the_box_under_it(distance_m, tilt_deg):
+    """A box on a box it nearly covers (a rim of 4-5 mm of the lower top shows): measured from
+    that rim, not from the table."""
+    lower = box_on(Plane(), 0.02, 0.01, (0.168, 0.069, 0.095), 15.0, colour=(40, 90, 200))
+    upper = box_on(lower, 0.001, -0.0005, (0.158, 0.060, 0.125), 0.0, colour=(190, 150, 100))
+    camera = Camera.tilted(distance_m, tilt_deg, width=640, height=480, hfov_deg=60)
+    depth, colour = render(Scene(camera, Plane(), (lower, upper)))
+    found = find_boxes(depth, camera.lens, camera.camera_to_world, colour)
+    top = found.boxes[0]
+    assert top.size[2] == pytest.approx(0.125, abs=0.001)
+    assert math.dist(top.centre, upper.centre) <= 0.0025 * distance_m
+
+
+TAN = ((200, 150, 90), (140, 100, 60))
+"""Two carton colours, alternating so touching cartons part by colour."""
+
+
+def test_pallet_margin_under_rows_of_two_heights():
+    """Rows of tall, low and tall cartons inset 5 cm on a pallet, D435 noise at 2 m: the far
+    row (its foot hidden, lower cartons in front) is measured from the pallet's margin, not
+    from the low cartons' tops."""
+    rng = np.random.default_rng(4)
+    pallet = box_on(Plane(), 0.0, 0.0, (1.2, 0.8, 0.144), 0.0, (120, 90, 60))
+    cartons = []
+    for y, size in ((-0.2125, (0.36, 0.275, 0.3)), (0.025, (0.275, 0.2, 0.2))):
+        count = 3 if size[0] > 0.3 else 4
+        for col in range(count):
+            x = (col - (count - 1) / 2) * size[0]
+            cartons.append(box_on(pallet, x, y, size, 0.0, TAN[col % 2]))
+    for col in range(3):
+        far = box_on(pallet, (col - 1) * 0.36, 0.2625, (0.36, 0.275, 0.3), 0.0, TAN[col % 2])
+        cartons.append(far)
+    camera = Camera.tilted(
+        1.86, 10.0, target=(0.0, -0.12, 0.144), width=640, height=480, hfov_deg=56.0
+    )
+    depth, colour = render(Scene(camera, Plane(), (pallet, *cartons)))
+    found = find_boxes(
+        add_noise(depth, Noise.d435(), rng), camera.lens, camera.camera_to_world, colour
+    )
+    for box, true in match(found.boxes, tuple(cartons)):
+        assert box.size[2] == pytest.approx(true.size[2], abs=0.01)
+        assert math.dist(box.centre, true.centre) <= 0.010

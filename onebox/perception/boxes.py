@@ -162,9 +162,11 @@ class _Plateau:
     base_m: float = 0.0
     on_plateau: int | None = None
     platform: bool = False
+    """A level others stand on whose own extent is hidden (a pallet's top): never a box."""
     on_platform: bool = False
     """Stands on a platform (a pallet's top), where cartons stand packed side by side."""
-    """A level others stand on whose own extent is hidden (a pallet's top): never a box."""
+    ledge_m: float | None = None
+    """The highest flat level seen just past the top's outline (see :func:`_ledges`)."""
 
 
 @functools.lru_cache(maxsize=8)
@@ -601,6 +603,14 @@ def _measure_all(
         footprint,
         whole_area,
     )
+    # A rim of a lower top a few pixels wide is told from noise only while the noise is well
+    # under a footprint (3 sigma within two): a close camera, a clean picture.
+    mean_depth = np.bincount(top, weights=d, minlength=count) / n
+    sigma = np.asarray(support.sigma_at(mean_depth), dtype=np.float64)
+    ledge = _ledges(
+        e_flat, e_top, label_at, h_flat, tops.width, level, tol, footprint, settings, count
+    )
+    ledge[3.0 * sigma > 2.0 * footprint] = np.nan
     edge_starts = np.searchsorted(e_top, np.arange(count))
     edge_stops = np.searchsorted(e_top, np.arange(count), side="right")
     loose = _loose_groups(p_idx, p_top, p_h, level, tol, count)
@@ -616,6 +626,7 @@ def _measure_all(
             float(footprint[t]),
             float(area[t]),
         )
+        p.ledge_m = None if np.isnan(ledge[t]) else float(ledge[t])
         plateaus.append(p)
         rect = rects[t]
         if not eligible[t] or rect is None:
@@ -641,6 +652,109 @@ def _measure_all(
             continue
         p.is_box = True
     return plateaus
+
+
+LEDGE_REACH_PX = 12
+"""How far past a top's outline (pixels, along each off-top direction) the level just under
+it is looked for: a few pixels past a side seen edge-on, past the side face seen from the front."""
+
+
+def _flat(
+    h_flat: Float32Array, flat: npt.NDArray[np.intp], width: int, limit: Float64Array | float
+) -> BoolArray:
+    """Whether the readings at these flat indices lie on a level surface: a neighbour across
+    and a neighbour down agree with each one within ``limit`` (a side face's level lines run
+    one way only; a rim of a lower top two pixels wide still has both)."""
+    size = len(h_flat)
+    here = h_flat[flat]
+    with np.errstate(invalid="ignore"):
+        across = (np.abs(h_flat[np.minimum(flat + 1, size - 1)] - here) < limit) | (
+            np.abs(h_flat[np.maximum(flat - 1, 0)] - here) < limit
+        )
+        down = (np.abs(h_flat[np.minimum(flat + width, size - 1)] - here) < limit) | (
+            np.abs(h_flat[np.maximum(flat - width, 0)] - here) < limit
+        )
+    result: BoolArray = across & down
+    return result
+
+
+def _ledges(
+    e_flat: npt.NDArray[np.intp],
+    e_top: npt.NDArray[np.int32],
+    label_at: npt.NDArray[np.int32],
+    h_flat: Float32Array,
+    width: int,
+    level: Float64Array,
+    tol: Float64Array,
+    footprint: Float64Array,
+    settings: FinderSettings,
+    count: int,
+) -> Float64Array:
+    """Per top, the highest flat level seen just past its outline, below it and above the
+    support (NaN: none). A box standing on a box that it nearly covers leaves only a rim of the
+    lower top, a few pixels wide and cut up by its edges: never a top of its own, yet a level
+    the box stands on. The candidate is checked by the probes (:func:`_bases`)."""
+    result = np.full(count, np.nan)
+    if len(e_flat) == 0:
+        return result
+    size = len(h_flat)
+    rows_all = size // width
+    rows, cols = np.divmod(e_flat, width)
+    own = e_top + 1
+    heights = []
+    which = []
+    reach = np.arange(1, LEDGE_REACH_PX + 1)
+    for dr, dc in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        off = label_at[e_flat + dr * width + dc] != own
+        r = rows[off, np.newaxis] + dr * reach
+        c = cols[off, np.newaxis] + dc * reach
+        inside = (r >= 0) & (r < rows_all) & (c >= 0) & (c < width)
+        flat = np.where(inside, r * width + c, 0)
+        seen = np.where(inside & (label_at[flat] != own[off, np.newaxis]), h_flat[flat], np.nan)
+        limit = np.minimum(tol, 0.5 * footprint)[e_top[off], np.newaxis]
+        seen = np.where(_flat(h_flat, flat, width, limit), seen, np.nan)
+        heights.append(seen.reshape(-1))
+        which.append(np.repeat(e_top[off], LEDGE_REACH_PX))
+    values = np.concatenate(heights).astype(np.float64)
+    group = np.concatenate(which)
+    lowest = settings.min_height_m
+    with np.errstate(invalid="ignore"):
+        keep = (values > lowest) & (values < level[group] - np.maximum(2.0 * tol[group], lowest))
+    values, group = values[keep], group[keep]
+    if len(values) == 0:
+        return result
+    # Per top a histogram in bins of a third of the tolerance; a window of +-tol around each
+    # bin; the highest window holding enough readings is the ledge.
+    bin_m = max(float(tol.min()) / 3.0, 1e-4)
+    bins = int((float(values.max()) - lowest) / bin_m) + 2
+    if bins * count > 4_000_000:
+        bin_m *= bins * count / 4_000_000
+        bins = int((float(values.max()) - lowest) / bin_m) + 2
+    at = ((values - lowest) / bin_m).astype(np.intp)
+    hist = np.bincount(group * bins + at, minlength=count * bins).reshape(count, bins)
+    cumulative = np.zeros((count, bins + 1))
+    np.cumsum(hist, axis=1, out=cumulative[:, 1:])
+    half = np.ceil(tol / bin_m).astype(np.intp)[:, np.newaxis]
+    columns = np.arange(bins)[np.newaxis, :]
+    window = np.take_along_axis(cumulative, np.minimum(columns + half + 1, bins), 1)
+    window -= np.take_along_axis(cumulative, np.maximum(columns - half, 0), 1)
+    total = np.bincount(group, minlength=count)[:, np.newaxis]
+    enough = window >= np.maximum(8, 0.05 * total)
+    has = enough.any(axis=1)
+    if not has.any():
+        return result
+    # The highest window holding enough is the top edge of the level's readings: the level is
+    # the fullest window within two tolerances below it.
+    top_bin = bins - 1 - np.argmax(enough[:, ::-1], axis=1)
+    span = (columns <= top_bin[:, np.newaxis]) & (columns >= top_bin[:, np.newaxis] - 2 * half)
+    peak = np.where(span, window, -1.0).argmax(axis=1)
+    centre = lowest + (peak + 0.5) * bin_m
+    near = np.abs(values - centre[group]) < tol[group]
+    sums = np.bincount(group[near], weights=values[near], minlength=count)
+    number = np.bincount(group[near], minlength=count)
+    found = has & (number > 0)
+    result[found] = sums[found] / number[found]
+    return result
 
 
 def _loose_groups(
@@ -693,13 +807,14 @@ def _spread(values: Float64Array) -> float:
 
 PROBE_FRACTIONS = np.linspace(-0.4, 0.4, 5)
 PROBE_REACH = np.array([1.0, 2.0, 4.0, 7.0])
-"""Each probe line's points, in steps of max(8 mm, 3 footprints) out from the side: the box
-itself hides the nearest when the camera looks down past that side."""
+"""Each probe line's points past the first (the foot), in steps of max(8 mm, 3 footprints)
+out from the side: the box itself hides the nearest when the camera looks down past that side."""
 
 
 def _probes(box: _Plateau) -> Float64Array:
     """Lines of points in the support plane going out from each side of a box's rectangle,
-    5 lines a side (lines x reaches x 2)."""
+    5 lines a side (lines x reaches x 2). The first point is the side's foot, 1.5 footprints
+    and 1 mm out (a rim of a lower top a few pixels wide); then PROBE_REACH steps."""
     assert box.rect is not None
     rect = box.rect
     ax = np.asarray(rect.axis)
@@ -715,11 +830,9 @@ def _probes(box: _Plateau) -> Float64Array:
         + (2 * PROBE_FRACTIONS[np.newaxis, :, np.newaxis] * half_along[:, np.newaxis, np.newaxis])
         * along[:, np.newaxis, :]
     )  # sides x fractions x 2
-    points = (
-        start[:, :, np.newaxis, :]
-        + (PROBE_REACH * step)[:, np.newaxis] * out[:, np.newaxis, np.newaxis, :]
-    )
-    result: Float64Array = points.reshape(-1, len(PROBE_REACH), 2)
+    reach = np.concatenate([[1.5 * box.footprint_m + 0.001], PROBE_REACH * step])
+    points = start[:, :, np.newaxis, :] + reach[:, np.newaxis] * out[:, np.newaxis, np.newaxis, :]
+    result: Float64Array = points.reshape(-1, len(reach), 2)
     return result
 
 
@@ -832,10 +945,22 @@ def _bases(
         return
     rows_n, cols_n = height_m.shape
     cam = _plane_basis(support, None)
-    levels = [None, *plateaus]
-    level_h = np.array([0.0] + [p.height_m for p in plateaus])
+    # Levels: the support, every top, and each box's ledge (a level of its own box only).
+    ledged = [i for i, b in enumerate(boxes) if b.ledge_m is not None]
+    levels: list[_Plateau | None] = [None, *plateaus, *(None for _ in ledged)]
+    owner = np.array([-1] * (1 + len(plateaus)) + ledged, dtype=np.intp)
+    level_h = np.array(
+        [0.0] + [p.height_m for p in plateaus] + [boxes[i].ledge_m or 0.0 for i in ledged]
+    )
     support_tol = 3.0 * float(support.sigma_at(support.distance_m))
-    level_tol = np.maximum(np.array([support_tol] + [p.tolerance_m for p in plateaus]), 0.004)
+    level_tol = np.maximum(
+        np.array(
+            [support_tol]
+            + [p.tolerance_m for p in plateaus]
+            + [boxes[i].tolerance_m for i in ledged]
+        ),
+        0.004,
+    )
     label_height = np.full(max(p.label for p in plateaus) + 1, np.nan)
     label_height[[p.label for p in plateaus]] = [p.height_m for p in plateaus]
     probes = np.stack([_probes(box) for box in boxes])  # boxes x lines x reaches x 2
@@ -872,9 +997,35 @@ def _bases(
         top_h = np.append(label_height, np.nan)[np.where(label_first >= 0, label_first, -1)]
         match &= (label_first < 0) | (np.abs(top_h - lh[..., 0]) < lt[..., 0])
         lower = any_known & (h_first < lh[..., 0] - lt[..., 0])
+    # A level is seen on pixels of no top, or of a top that may reach under the box (not a
+    # box of its own standing beside it: the top of the next carton along a row is no sign
+    # of what the box stands on).
+    under = np.ones((len(label_height) + 1, len(boxes)), dtype=bool)
+    by_label = {p.label: p for p in plateaus if p.is_box}
+    for t in np.unique(label_first[match & (label_first >= 0)]):
+        if int(t) in by_label:
+            under[t] = [_reaches_under(by_label[int(t)], box) for box in boxes]
+    box_i = np.arange(len(boxes)).reshape(1, -1, 1)
+    match &= (label_first < 0) | under[np.where(label_first >= 0, label_first, -1), box_i]
+    if ledged:
+        rows_l = slice(1 + len(plateaus), None)
+        # ... and on a level surface, not on the box's own side face seen at a slant.
+        at = np.take_along_axis((vi * cols_n + ui)[rows_l], first[rows_l], -1)[..., 0]
+        fp = np.array([b.footprint_m for b in boxes]).reshape(1, -1, 1)
+        limit = np.minimum(lt[rows_l, ..., 0], 0.5 * fp)
+        match[rows_l] &= _flat(height_m.reshape(-1), at, cols_n, limit)
+    # Past a side the camera cannot see the foot of (the box hides it), a lower reading
+    # farther out says only that the level is narrower than the box's shadow: against a
+    # box's own ledge only a lower reading at the foot itself counts.
     matches, lowers = match.sum(axis=2), lower.sum(axis=2)
+    foot_lowers = (lower & (first[..., 0] == 0)).sum(axis=2)
     box_h = np.array([b.height_m for b in boxes])
-    allowed = level_h[:, np.newaxis] < box_h[np.newaxis, :] - settings.min_height_m
+    # A level within the noise of the box's own top is that top, not one under it.
+    box_tol = np.array([b.tolerance_m for b in boxes])
+    gap = np.maximum(settings.min_height_m, box_tol[np.newaxis, :] + level_tol[:, np.newaxis])
+    allowed = level_h[:, np.newaxis] < box_h[np.newaxis, :] - gap
+    mine = owner[:, np.newaxis] == np.arange(len(boxes))[np.newaxis, :]
+    allowed &= (owner[:, np.newaxis] < 0) | mine
     for j, level in enumerate(levels):
         if level is None:
             continue
@@ -886,11 +1037,27 @@ def _bases(
     per_side = match.reshape(*match.shape[:2], 4, -1).sum(axis=3) >= 2
     across = (per_side[..., 0] & per_side[..., 1]) | (per_side[..., 2] & per_side[..., 3])
     seen_ok = allowed & (matches >= 2) & ((matches >= 0.75 * (matches + lowers)) | across)
+    # A ledge found right past the box's own outline needs less: a rim of the box under it is
+    # often narrower than the foot's probe along some sides (the upper box turned on it).
+    own_ok = (owner[:, np.newaxis] >= 0) & (matches >= 3)
+    own_ok &= matches >= 0.5 * (matches + foot_lowers)
+    seen_ok |= allowed & own_ok
     base: dict[int, int] = {}
     for i in range(len(boxes)):
         ok = np.flatnonzero(seen_ok[:, i])
         if len(ok):
-            base[i] = int(ok[np.argmax(level_h[ok])])
+            j = int(ok[np.argmax(level_h[ok])])
+            if owner[j] >= 0:
+                # The ledge is the top of a box the box stands on, when one is at its height.
+                same = np.flatnonzero(
+                    allowed[:, i]
+                    & (owner < 0)
+                    & (np.abs(level_h - level_h[j]) < level_tol[j])
+                    & (level_h > 0)
+                )
+                if len(same):
+                    j = int(same[np.argmax(matches[same, i])])
+            base[i] = j
     # A box hemmed in by touching boxes stands where most of them stand.
     for _ in range(3):
         changed = False
@@ -915,8 +1082,8 @@ def _bases(
     for i, box in enumerate(boxes):
         if i not in base:
             # Still undecided: the highest platform it stands over, else the support.
-            under = [j for j in platforms if allowed[j, i]]
-            base[i] = max(under, key=lambda j: level_h[j]) if under else 0
+            over = [j for j in platforms if allowed[j, i]]
+            base[i] = int(max(over, key=lambda j: level_h[j])) if over else 0
         box.base_m = float(level_h[base[i]])
         level = levels[base[i]]
         if level is not None and base[i] in platforms:
