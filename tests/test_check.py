@@ -3,25 +3,18 @@
 from __future__ import annotations
 
 import subprocess
-import sys
 
 from onebox.describe import describe as describe_message
 from onebox.keys import TYPES
 from onebox.recording import describe
 from onebox.testing.fake_capture import write_mcap
-from onebox.testing.processes import CAPTURE, ROOT, free_port
+from onebox.testing.processes import CAPTURE, free_port, run_onebox
 from schemas import CameraInfo, Header, Image
 from services import check
 
 
 def run_check(endpoint: str, *args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "services.cli", "check", "--connect", endpoint, *args],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
+    return run_onebox("check", "--connect", endpoint, *args)
 
 
 def test_check_with_nothing_running_says_how_to_start_and_fails():

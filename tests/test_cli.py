@@ -14,18 +14,8 @@ from onebox import topic_stats
 from onebox.recording import RecordingWriter, describe
 from onebox.testing.fake_capture import capture, tf_static, write_mcap
 from onebox.testing.processes import CAPTURE, ROOT
+from onebox.testing.processes import run_onebox as onebox
 from schemas import Detection3DArray, Header, TFMessage, codec
-
-
-def onebox(*args: str, timeout_s: float = 60) -> subprocess.CompletedProcess[str]:
-    """Run ``onebox ARGS`` to its end."""
-    return subprocess.run(
-        [sys.executable, "-m", "services.cli", *args],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=timeout_s,
-    )
 
 
 @pytest.fixture

@@ -3,9 +3,6 @@
 from __future__ import annotations
 
 import re
-import signal
-import subprocess
-import threading
 import time
 
 import msgspec
@@ -16,7 +13,7 @@ from onebox import bus
 from onebox.geometry import FrameTree, matrix_of
 from onebox.sync import StampMatcher
 from onebox.testing.capture import CAPTURE
-from onebox.testing.processes import Inbox, has_key
+from onebox.testing.processes import Inbox, Output, has_key
 from onebox.testing.synthetic import (
     Scene,
     camera_info,
@@ -41,58 +38,6 @@ BOX_LINE = (
 )
 """The seed's line as the box finder prints it: the same numbers or truer ones."""
 SECOND_NS = 1_000_000_000
-
-
-class Output:
-    """Collects a process's output lines as they come, so a test can wait on a log line."""
-
-    def __init__(self, proc: subprocess.Popen[str]) -> None:
-        self.proc = proc
-        self.lines: list[str] = []
-        self._cond = threading.Condition()
-        self._thread = threading.Thread(target=self._read, daemon=True)
-        self._thread.start()
-
-    def _read(self) -> None:
-        assert self.proc.stdout is not None
-        for line in self.proc.stdout:
-            with self._cond:
-                self.lines.append(line.rstrip("\n"))
-                self._cond.notify_all()
-
-    def wait_for(self, pattern: str, timeout_s: float = 20.0) -> str:
-        """The first line matching ``pattern`` (a regular expression)."""
-        regex = re.compile(pattern)
-
-        def found() -> str | None:
-            return next((line for line in self.lines if regex.search(line)), None)
-
-        with self._cond:
-            if not self._cond.wait_for(lambda: found() is not None, timeout=timeout_s):
-                raise AssertionError(
-                    f"no line matching {pattern!r} in {timeout_s} s:\n" + self.text
-                )
-            line = found()
-            assert line is not None
-            return line
-
-    @property
-    def text(self) -> str:
-        return "\n".join(self.lines)
-
-    def stop(self) -> str:
-        """SIGTERM the process, wait for it and return everything it printed."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
-        try:
-            self.proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
-        self._thread.join(timeout=5)
-        if self.proc.stdout is not None:
-            self.proc.stdout.close()
-        return self.text
 
 
 @pytest.fixture

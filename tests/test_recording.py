@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -20,7 +19,8 @@ from onebox.errors import RecordingError
 from onebox.keys import type_for_key
 from onebox.recording import RecordingWriter, describe, iter_messages, read_capture
 from onebox.testing.capture import load_capture
-from onebox.testing.processes import ROOT, Inbox, has_key
+from onebox.testing.processes import Inbox, has_key
+from onebox.testing.processes import run_onebox as run_cli
 from schemas import (
     CameraInfo,
     Clock,
@@ -85,17 +85,6 @@ def wait_file(condition: Any, timeout_s: float = 15.0) -> None:
     while not condition():
         assert time.monotonic() < deadline, "timed out waiting on the recording"
         time.sleep(0.05)
-
-
-def run_cli(*args: str, timeout_s: float = 30.0) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "services.cli", *args],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=timeout_s,
-        check=False,
-    )
 
 
 # --- a reader with only mcap and msgpack --------------------------------------------------------

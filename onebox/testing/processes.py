@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
+import re
 import select
 import signal
 import socket
@@ -46,7 +47,7 @@ class Processes:
         self, *args: str, env: dict[str, str] | None = None, connect: bool = True
     ) -> subprocess.Popen[str]:
         """Start ``onebox ARGS`` connected to this test's router; output is captured."""
-        cmd = [sys.executable, "-m", "services.cli", *args]
+        cmd = [*ONEBOX, *args]
         if connect:
             cmd += ["--connect", self.endpoint]
         full_env = {**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})}
@@ -164,3 +165,74 @@ def wait_for_output(proc: subprocess.Popen[str], text: str, timeout_s: float = 3
                 raise AssertionError(f"exited before {text!r}; got:\n{seen.decode()}")
             seen += chunk
     return seen.decode()
+
+
+ONEBOX = [sys.executable, "-m", "services.cli"]
+"""The ``onebox`` command, run with this interpreter from the checkout."""
+
+
+def run_onebox(
+    *args: str, timeout_s: float = 60.0, env: dict[str, str] | None = None
+) -> subprocess.CompletedProcess[str]:
+    """Run ``onebox ARGS`` to its end; its output is captured as text."""
+    return subprocess.run(
+        [*ONEBOX, *args],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=timeout_s,
+        check=False,
+        env=None if env is None else {**os.environ, **env},
+    )
+
+
+class Output:
+    """Collects a process's output lines as they come, so a test can wait on a log line."""
+
+    def __init__(self, proc: subprocess.Popen[str]) -> None:
+        self.proc = proc
+        self.lines: list[str] = []
+        self._cond = threading.Condition()
+        self._thread = threading.Thread(target=self._read, daemon=True)
+        self._thread.start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            with self._cond:
+                self.lines.append(line.rstrip("\n"))
+                self._cond.notify_all()
+
+    def wait_for(self, pattern: str, timeout_s: float = 20.0) -> str:
+        """The first line matching ``pattern`` (a regular expression)."""
+        regex = re.compile(pattern)
+
+        def found() -> str | None:
+            return next((line for line in self.lines if regex.search(line)), None)
+
+        with self._cond:
+            if not self._cond.wait_for(lambda: found() is not None, timeout=timeout_s):
+                raise AssertionError(
+                    f"no line matching {pattern!r} in {timeout_s} s:\n" + self.text
+                )
+            line = found()
+            assert line is not None
+            return line
+
+    @property
+    def text(self) -> str:
+        return "\n".join(self.lines)
+
+    def stop(self) -> str:
+        """SIGTERM the process, wait for it and return everything it printed."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+        try:
+            self.proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        self._thread.join(timeout=5)
+        if self.proc.stdout is not None:
+            self.proc.stdout.close()
+        return self.text
