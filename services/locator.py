@@ -132,7 +132,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "workspace",
         "",
         "report only boxes whose top middle lies within XMIN,XMAX,YMIN,YMAX,ZMIN,ZMAX (metres, "
-        "world_frame), e.g. to leave out a robot or a machine at the edge of the view",
+        "world_frame), e.g. to leave out a robot or a machine at the edge of the view; write "
+        "--workspace=-0.5,... when the first number is negative",
         kind=str,
     )
     settings.add(

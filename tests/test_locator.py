@@ -27,6 +27,7 @@ from schemas import (
     Detection3DArray,
     GroundTruth,
     Image,
+    SupportPlane,
     TFMessage,
     TransformStamped,
     codec,
@@ -187,6 +188,39 @@ def test_pose_source_pose_agrees_with_tf(locators, test_bus, inbox):
     locators("--pose-source", "tf")
     by_tf = camera.until_measured(inbox)
     assert by_tf.detections[0].bbox == by_pose.detections[0].bbox
+
+
+def test_without_a_pose_the_box_is_reported_in_the_cameras_frame(locators, test_bus, inbox):
+    """--pose-source none (a user with only a depth camera): the box and the surface come out in
+    camera_optical_frame, the box 0.34 m away along the optical axis's side of the surface,
+    6 cm tall and 6 cm wide, with no tilt from a world it does not know."""
+    test_bus.subscribe_raw("detections", inbox)
+    test_bus.subscribe_raw("support", inbox)
+    camera = Camera(test_bus)
+    locators("--pose-source", "none")
+    array = camera.until_measured(inbox)
+    assert array.header.frame_id == "camera_optical_frame"
+    [detection] = array.detections
+    size, centre = detection.bbox.size, detection.bbox.center.position
+    assert size.z == pytest.approx(0.06, abs=1e-4)
+    assert size.x == pytest.approx(0.06, abs=0.002) and size.y == pytest.approx(0.06, abs=0.002)
+    # The seed's camera looks straight down from 0.40 m: the box's middle is 0.37 m away, and
+    # world (x, y) = (0.065, 0.0405) is optical (x, -y).
+    assert (centre.x, centre.y, centre.z) == pytest.approx((0.065, -0.0405, 0.37), abs=0.001)
+    items = inbox.wait(has_key("support"))
+    support = [codec(SupportPlane).decode(p) for k, p in items if k == "support"][-1]
+    assert support.header.frame_id == "camera_optical_frame" and support.tilt_deg is None
+    assert support.offset_m == pytest.approx(0.40, abs=0.001)
+
+
+def test_workspace_leaves_out_what_lies_outside(locators, test_bus, inbox):
+    """A workspace that does not hold the box: an empty array, and the no-box line."""
+    test_bus.subscribe_raw("detections", inbox)
+    camera = Camera(test_bus)
+    camera.publish_tf()
+    output = locators("--workspace=-0.5,0.0,-0.5,0.5,0.0,0.5")
+    assert camera.until_measured(inbox).detections == []
+    output.wait_for("no box in view")
 
 
 def test_no_box_gives_an_empty_array_and_the_no_box_line(locators, test_bus, inbox):
