@@ -192,7 +192,7 @@ def _plane_basis(support: Support, camera_to_world: Float64Array | None) -> Floa
         ref = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.95 else np.array([0.0, 1.0, 0.0])
     e1 = ref - n * (ref @ n)
     e1 /= np.linalg.norm(e1)
-    e2 = np.cross(n, e1)
+    e2 = _cross(n, e1)
     return np.stack([e1, e2, n])
 
 
@@ -607,10 +607,21 @@ def _measure_all(
     # under a footprint (3 sigma within two): a close camera, a clean picture.
     mean_depth = np.bincount(top, weights=d, minlength=count) / n
     sigma = np.asarray(support.sigma_at(mean_depth), dtype=np.float64)
+    # Only for the tops that may be boxes, and while the noise lets a rim be told.
+    rim = eligible & (3.0 * sigma <= 2.0 * footprint)
+    at_rim = rim[e_top]
     ledge = _ledges(
-        e_flat, e_top, label_at, h_flat, tops.width, level, tol, footprint, settings, count
+        e_flat[at_rim],
+        e_top[at_rim],
+        label_at,
+        h_flat,
+        tops.width,
+        level,
+        tol,
+        footprint,
+        settings,
+        count,
     )
-    ledge[3.0 * sigma > 2.0 * footprint] = np.nan
     edge_starts = np.searchsorted(e_top, np.arange(count))
     edge_stops = np.searchsorted(e_top, np.arange(count), side="right")
     loose = _loose_groups(p_idx, p_top, p_h, level, tol, count)
@@ -703,6 +714,7 @@ def _ledges(
     own = e_top + 1
     heights = []
     which = []
+    where = []
     reach = np.arange(1, LEDGE_REACH_PX + 1)
     for dr, dc in ((0, 1), (0, -1), (1, 0), (-1, 0)):
         off = label_at[e_flat + dr * width + dc] != own
@@ -711,16 +723,20 @@ def _ledges(
         inside = (r >= 0) & (r < rows_all) & (c >= 0) & (c < width)
         flat = np.where(inside, r * width + c, 0)
         seen = np.where(inside & (label_at[flat] != own[off, np.newaxis]), h_flat[flat], np.nan)
-        limit = np.minimum(tol, 0.5 * footprint)[e_top[off], np.newaxis]
-        seen = np.where(_flat(h_flat, flat, width, limit), seen, np.nan)
         heights.append(seen.reshape(-1))
         which.append(np.repeat(e_top[off], LEDGE_REACH_PX))
+        where.append(flat.reshape(-1))
     values = np.concatenate(heights).astype(np.float64)
     group = np.concatenate(which)
     lowest = settings.min_height_m
     with np.errstate(invalid="ignore"):
         keep = (values > lowest) & (values < level[group] - np.maximum(2.0 * tol[group], lowest))
+    keep = np.flatnonzero(keep)
     values, group = values[keep], group[keep]
+    # ... on a level surface (not a side face seen at a slant).
+    limit = np.minimum(tol, 0.5 * footprint)[group]
+    level_surface = _flat(h_flat, np.concatenate(where)[keep], width, limit)
+    values, group = values[level_surface], group[level_surface]
     if len(values) == 0:
         return result
     # Per top a histogram in bins of a third of the tolerance; a window of +-tol around each
@@ -916,17 +932,16 @@ def _reaches_under(lower: _Plateau, upper: _Plateau, slack: float = 0.01) -> boo
         return True
     assert upper.rect is not None
     rect = lower.rect
-    ax = np.asarray(rect.axis)
-    perp = np.array([-ax[1], ax[0]])
-    rel = np.asarray(upper.rect.middle) - np.asarray(rect.middle)
+    ax0, ax1 = rect.axis
+    rx = upper.rect.middle[0] - rect.middle[0]
+    ry = upper.rect.middle[1] - rect.middle[1]
+    along, across = rx * ax0 + ry * ax1, ry * ax0 - rx * ax1
     hl, hw = rect.length_m / 2, rect.width_m / 2
-    if abs(rel @ ax) <= hl + slack and abs(rel @ perp) <= hw + slack:
+    if abs(along) <= hl + slack and abs(across) <= hw + slack:
         return True
-    for normal in rect.hidden_normals:
-        out = np.asarray(normal)
-        side = np.array([-out[1], out[0]])
-        half_out, half_side = (hl, hw) if abs(out @ ax) > 0.7 else (hw, hl)
-        if rel @ out >= half_out - slack and abs(rel @ side) <= half_side + slack:
+    for o0, o1 in rect.hidden_normals:
+        half_out, half_side = (hl, hw) if abs(o0 * ax0 + o1 * ax1) > 0.7 else (hw, hl)
+        if rx * o0 + ry * o1 >= half_out - slack and abs(ry * o0 - rx * o1) <= half_side + slack:
             return True
     return False
 
@@ -963,13 +978,29 @@ def _bases(
     )
     label_height = np.full(max(p.label for p in plateaus) + 1, np.nan)
     label_height[[p.label for p in plateaus]] = [p.height_m for p in plateaus]
+    box_h = np.array([b.height_m for b in boxes])
+    # A level within the noise of the box's own top is that top, not one under it.
+    box_tol = np.array([b.tolerance_m for b in boxes])
+    gap = np.maximum(settings.min_height_m, box_tol[np.newaxis, :] + level_tol[:, np.newaxis])
+    allowed = level_h[:, np.newaxis] < box_h[np.newaxis, :] - gap
+    mine = owner[:, np.newaxis] == np.arange(len(boxes))[np.newaxis, :]
+    allowed &= (owner[:, np.newaxis] < 0) | mine
+    for j, level in enumerate(levels):
+        if level is None:
+            continue
+        for i, box in enumerate(boxes):
+            if allowed[j, i]:
+                allowed[j, i] = _reaches_under(level, box)
+    # Only the pairs (level, box) that may be the box's base are probed.
+    pair_l, pair_b = np.nonzero(allowed)
     probes = np.stack([_probes(box) for box in boxes])  # boxes x lines x reaches x 2
-    # Camera-frame probe points at every level: a e1 + b e2 + (level - offset) n.
-    shape = (-1, 1, 1, 1, 1)
+    # Camera-frame probe points at each pair's level: a e1 + b e2 + (level - offset) n.
+    shape = (-1, 1, 1, 1)
+    pair_probes = probes[pair_b]
     pts = (
-        probes[np.newaxis, ..., :1] * cam[0]
-        + probes[np.newaxis, ..., 1:] * cam[1]
-        + (level_h.reshape(shape) - support.offset_camera_m) * cam[2]
+        pair_probes[..., :1] * cam[0]
+        + pair_probes[..., 1:] * cam[1]
+        + (level_h[pair_l].reshape(shape) - support.offset_camera_m) * cam[2]
     )
     z = pts[..., 2]
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -980,9 +1011,9 @@ def _bases(
     vi = np.where(inside, v, 0).astype(np.intp)
     seen_h = np.where(inside, height_m[vi, ui], np.nan)
     seen_label = np.where(inside, labels_top[vi, ui] - 1, -2)
-    own = np.array([b.label for b in boxes]).reshape(1, -1, 1, 1)
-    lh = level_h.reshape(shape[:-1])
-    lt = level_tol.reshape(shape[:-1])
+    own = np.array([b.label for b in boxes])[pair_b].reshape(-1, 1, 1)
+    lh = level_h[pair_l].reshape(shape[:-1])
+    lt = level_tol[pair_l].reshape(shape[:-1])
     # Along each line the first point whose surface is seen (a reading, not the box itself,
     # nothing higher in front of it) tells whether the level is there or lower.
     with np.errstate(invalid="ignore"):
@@ -1005,37 +1036,31 @@ def _bases(
     for t in np.unique(label_first[match & (label_first >= 0)]):
         if int(t) in by_label:
             under[t] = [_reaches_under(by_label[int(t)], box) for box in boxes]
-    box_i = np.arange(len(boxes)).reshape(1, -1, 1)
-    match &= (label_first < 0) | under[np.where(label_first >= 0, label_first, -1), box_i]
-    if ledged:
-        rows_l = slice(1 + len(plateaus), None)
+    match &= (label_first < 0) | under[
+        np.where(label_first >= 0, label_first, -1), pair_b[:, np.newaxis]
+    ]
+    ledge_rows = np.flatnonzero(owner[pair_l] >= 0)
+    if len(ledge_rows):
         # ... and on a level surface, not on the box's own side face seen at a slant.
-        at = np.take_along_axis((vi * cols_n + ui)[rows_l], first[rows_l], -1)[..., 0]
-        fp = np.array([b.footprint_m for b in boxes]).reshape(1, -1, 1)
-        limit = np.minimum(lt[rows_l, ..., 0], 0.5 * fp)
-        match[rows_l] &= _flat(height_m.reshape(-1), at, cols_n, limit)
+        at = np.take_along_axis((vi * cols_n + ui)[ledge_rows], first[ledge_rows], -1)[..., 0]
+        fp = np.array([b.footprint_m for b in boxes])[pair_b[ledge_rows]].reshape(-1, 1)
+        limit = np.minimum(lt[ledge_rows, ..., 0], 0.5 * fp)
+        match[ledge_rows] &= _flat(height_m.reshape(-1), at, cols_n, limit)
     # Past a side the camera cannot see the foot of (the box hides it), a lower reading
     # farther out says only that the level is narrower than the box's shadow: against a
     # box's own ledge only a lower reading at the foot itself counts.
-    matches, lowers = match.sum(axis=2), lower.sum(axis=2)
-    foot_lowers = (lower & (first[..., 0] == 0)).sum(axis=2)
-    box_h = np.array([b.height_m for b in boxes])
-    # A level within the noise of the box's own top is that top, not one under it.
-    box_tol = np.array([b.tolerance_m for b in boxes])
-    gap = np.maximum(settings.min_height_m, box_tol[np.newaxis, :] + level_tol[:, np.newaxis])
-    allowed = level_h[:, np.newaxis] < box_h[np.newaxis, :] - gap
-    mine = owner[:, np.newaxis] == np.arange(len(boxes))[np.newaxis, :]
-    allowed &= (owner[:, np.newaxis] < 0) | mine
-    for j, level in enumerate(levels):
-        if level is None:
-            continue
-        for i, box in enumerate(boxes):
-            if allowed[j, i]:
-                allowed[j, i] = _reaches_under(level, box)
+    grid = allowed.shape
+    matches = np.zeros(grid, dtype=np.intp)
+    lowers = np.zeros(grid, dtype=np.intp)
+    foot_lowers = np.zeros(grid, dtype=np.intp)
+    across = np.zeros(grid, dtype=bool)
+    matches[pair_l, pair_b] = match.sum(axis=1)
+    lowers[pair_l, pair_b] = lower.sum(axis=1)
+    foot_lowers[pair_l, pair_b] = (lower & (first[..., 0] == 0)).sum(axis=1)
     # A level counts when it is seen on at least two probes and hardly anything lower is, or
     # on two opposite sides (a box across a narrower one: past its other sides lies lower).
-    per_side = match.reshape(*match.shape[:2], 4, -1).sum(axis=3) >= 2
-    across = (per_side[..., 0] & per_side[..., 1]) | (per_side[..., 2] & per_side[..., 3])
+    per_side = match.reshape(len(pair_l), 4, -1).sum(axis=2) >= 2
+    across[pair_l, pair_b] = (per_side[:, 0] & per_side[:, 1]) | (per_side[:, 2] & per_side[:, 3])
     seen_ok = allowed & (matches >= 2) & ((matches >= 0.75 * (matches + lowers)) | across)
     # A ledge found right past the box's own outline needs less: a rim of the box under it is
     # often narrower than the foot's probe along some sides (the upper box turned on it).
@@ -1110,11 +1135,12 @@ def _is_platform(lower: _Plateau, upper: _Plateau) -> bool:
 
 def _inside(lower: _Plateau, upper: _Plateau) -> bool:
     assert lower.rect is not None and upper.rect is not None
-    ax = np.asarray(lower.rect.axis)
-    rel = np.asarray(upper.rect.middle) - np.asarray(lower.rect.middle)
-    return bool(
-        abs(rel @ ax) <= lower.rect.length_m / 2
-        and abs(rel @ np.array([-ax[1], ax[0]])) <= lower.rect.width_m / 2
+    ax0, ax1 = lower.rect.axis
+    rx = upper.rect.middle[0] - lower.rect.middle[0]
+    ry = upper.rect.middle[1] - lower.rect.middle[1]
+    return (
+        abs(rx * ax0 + ry * ax1) <= lower.rect.length_m / 2
+        and abs(ry * ax0 - rx * ax1) <= lower.rect.width_m / 2
     )
 
 
@@ -1123,11 +1149,14 @@ def _touch(a: _Plateau, b: _Plateau) -> bool:
     assert a.rect is not None and b.rect is not None
     gap = 0.02
     for r, s in ((a.rect, b.rect), (b.rect, a.rect)):
-        ax = np.asarray(r.axis)
-        for axis in (ax, np.array([-ax[1], ax[0]])):
-            pa = r.corners @ axis
-            pb = s.corners @ axis
-            if pa.max() + gap < pb.min() or pb.max() + gap < pa.min():
+        ax0, ax1 = r.axis
+        for u0, u1 in ((ax0, ax1), (-ax1, ax0)):
+            # Projections of the two rectangles on the axis: middle +- half extent.
+            ra = abs(r.length_m * (u0 * ax0 + u1 * ax1)) + abs(r.width_m * (u1 * ax0 - u0 * ax1))
+            s0, s1 = s.axis
+            rb = abs(s.length_m * (u0 * s0 + u1 * s1)) + abs(s.width_m * (u1 * s0 - u0 * s1))
+            dist = abs((s.middle[0] - r.middle[0]) * u0 + (s.middle[1] - r.middle[1]) * u1)
+            if dist > (ra + rb) / 2 + gap:
                 return False
     return True
 
@@ -1159,7 +1188,7 @@ def _report(
         length_c = rect.axis[0] * cam_basis[0] + rect.axis[1] * cam_basis[1]
         x_axis = rotation @ length_c
         z_axis = rotation @ n_c
-        y_axis = np.cross(z_axis, x_axis)
+        y_axis = _cross(z_axis, x_axis)
         top = rotation @ top_c + shift
         centre = rotation @ centre_c + shift
         if settings.workspace is not None and not all(
@@ -1168,7 +1197,7 @@ def _report(
             continue
         reference = basis[0]
         yaw = math.degrees(
-            math.atan2(float(length_c @ np.cross(n_c, reference)), float(length_c @ reference))
+            math.atan2(float(length_c @ _cross(n_c, reference)), float(length_c @ reference))
         )
         if camera_to_world is not None:
             yaw = math.degrees(math.atan2(float(x_axis[1]), float(x_axis[0])))
@@ -1200,6 +1229,13 @@ def _report(
         del kept
         result = [replace(r, on=None) for r in result]
     return result
+
+
+def _cross(a: Float64Array, b: Float64Array) -> Float64Array:
+    """a x b of two 3-vectors (np.cross costs tens of microseconds a call)."""
+    return np.array(
+        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    )
 
 
 def _quaternion(m: Float64Array) -> Float64Array:
