@@ -208,7 +208,8 @@ def bench_outages(netlab: Any, runs: int, down_s: float) -> None:
         print(f"recovered in 0 of {runs} runs")
     print(
         f"A -> C depth from B's link going down to 3 s after its return: longest gap median "
-        f"{statistics.median(gaps):.2f} s, worst {max(gaps):.2f} s (5 Hz: 0.20 s apart)"
+        f"{statistics.median(gaps):.2f} s, worst {max(gaps):.2f} s (5 Hz: 0.20 s apart); "
+        f"over 1 s in {sum(g > 1.0 for g in gaps)} of {runs} outages"
     )
 
 
