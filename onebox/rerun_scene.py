@@ -84,7 +84,11 @@ SAME = 1e-3
 changed by less than this since it was last sent is not sent again: 1 mm, about 0.1°."""
 SAME_PLANE = 5e-3
 """...and for the found support plane, which moves a little with every capture's noise:
-5 mm, about 0.3° (each change is kept by the web server as static data)."""
+5 mm, about 0.3°."""
+RESEND_NS = 1_000_000_000
+"""Live, the support plane stays on the timeline (being found anew, it may change often,
+and every static message is kept by the web server): sent again at least once a simulated
+second, so the little history the server keeps always holds one."""
 
 BOX_COLOUR = (0, 120, 255)
 TRUTH_COLOUR = (0, 200, 80)
@@ -256,9 +260,10 @@ class Live:
 
     ``picture_hz``: the colour and depth pictures at most this often (simulated time; 0: every
     one); the boxes still come with every capture. ``scale``: the pictures shrunk by this
-    factor (the lens with them). The camera's pose, the support plane and the true boxes are
-    sent only when they change, as static data: the one copy a late page gets, and kept by
-    the web server however much temporal data its memory limit drops.
+    factor (the lens with them). The camera's pose and the true boxes are sent only when they
+    change, as static data: the one copy a late page gets, kept by the web server however
+    much temporal data its memory limit drops. The support plane is sent when it changes and
+    at least every :data:`RESEND_NS`.
     """
 
     picture_hz: float = 1.0
@@ -303,7 +308,8 @@ class SceneLog:
         self._picture_interval_ns = (
             round(1e9 / live.picture_hz) if live is not None and live.picture_hz > 0 else 0
         )
-        self._last_picture_ns: dict[str, int] = {}
+        self._last_sent_ns: dict[str, int] = {}
+        """Live: the stamp each kind (colour, depth, support) was last sent with."""
         self._last_sent: dict[str, npt.NDArray[np.float64]] = {}
         """Live: what the pose, support plane and true boxes were when last sent."""
         self._last_points_ns: int | None = None
@@ -312,6 +318,8 @@ class SceneLog:
         """tf_static's transforms by child frame."""
         self._have_pose = False
         self._tf_pose_frame: str | None = None
+        self._picture_frame: str | None = None
+        """The frame the pictures came in, for placing the camera when tf_static comes late."""
 
     def start(self) -> None:
         """The static parts: the world's axes and the table."""
@@ -368,8 +376,9 @@ class SceneLog:
             rgb = pictures.rgb(message)
             self._pose_from_tf(message.header.frame_id)
             self._time(message.header.stamp_ns)
-            if not self._picture_due("colour", message.header.stamp_ns):
+            if not self._due("colour", message.header.stamp_ns, self._picture_interval_ns):
                 return "colour"
+            self._last_sent_ns["colour"] = message.header.stamp_ns
             picture = rr.Image(shrink_rgb(rgb, self._scale), color_model="RGB")
             self.rec.log(
                 f"{self._cam}/image/rgb",
@@ -423,14 +432,11 @@ class SceneLog:
         check_stamp(stamp_ns)
         self.rec.set_time(TIMELINE, duration=np.timedelta64(stamp_ns, "ns"))
 
-    def _picture_due(self, kind: str, stamp_ns: int) -> bool:
-        """Live: whether this picture is sent (at most one per interval of simulated time; a
-        stamp that goes back, a restarted sim, starts the count again)."""
-        last = self._last_picture_ns.get(kind)
-        if last is not None and 0 <= stamp_ns - last < self._picture_interval_ns:
-            return False
-        self._last_picture_ns[kind] = stamp_ns
-        return True
+    def _due(self, kind: str, stamp_ns: int, interval_ns: int) -> bool:
+        """Whether ``interval_ns`` of simulated time has passed since ``kind`` was last sent
+        (a stamp that goes back, a restarted sim, counts as passed)."""
+        last = self._last_sent_ns.get(kind)
+        return last is None or not 0 <= stamp_ns - last < interval_ns
 
     def _unchanged(self, what: str, *values: Any, within: float = SAME) -> bool:
         """Live: whether ``values`` are what was last sent for ``what`` (each within
@@ -448,8 +454,9 @@ class SceneLog:
         depth = pictures.depth_m(message)
         self._pose_from_tf(message.header.frame_id)
         self._time(message.header.stamp_ns)
-        if not self._picture_due("depth", message.header.stamp_ns):
+        if not self._due("depth", message.header.stamp_ns, self._picture_interval_ns):
             return
+        self._last_sent_ns["depth"] = message.header.stamp_ns
         # Every scale-th reading: an average would mix near and far at an edge.
         n = self._scale
         depth = depth[: depth.shape[0] // n * n : n, : depth.shape[1] // n * n : n]
@@ -509,6 +516,7 @@ class SceneLog:
         A recording without ``camera/pose`` (the committed capture) still shows the camera where
         the transforms say, as the locator's tf_static fallback does. Static, as the chain is.
         """
+        self._picture_frame = frame_id
         if self._have_pose or frame_id == self._tf_pose_frame:
             return
         chain = world_from_frame(self._static, frame_id)
@@ -565,6 +573,8 @@ class SceneLog:
             )
         if moved:
             self._tf_pose_frame = None  # the camera's chain may have changed: place it again
+            if self._picture_frame is not None:  # now, if the pictures came first
+                self._pose_from_tf(self._picture_frame)
 
     def _boxes(
         self, poses: list[tuple[Pose, Vector3]]
@@ -623,8 +633,11 @@ class SceneLog:
         self._time(message.header.stamp_ns)
         tilt = "" if message.tilt_deg is None else f", tilt {message.tilt_deg:.1f}°"
         entity = SUPPORT if message.header.frame_id in ("", WORLD_FRAME) else f"{self._cam}/support"
-        if self._unchanged(entity, n, message.offset_m, within=SAME_PLANE):
+        stamp_ns = message.header.stamp_ns
+        changed = not self._unchanged(entity, n, message.offset_m, within=SAME_PLANE)
+        if not changed and not self._due(entity, stamp_ns, RESEND_NS):
             return
+        self._last_sent_ns[entity] = stamp_ns
         self.rec.log(
             entity,
             rr.Mesh3D(
@@ -633,7 +646,6 @@ class SceneLog:
                 albedo_factor=SUPPORT_COLOUR,
             ),
             rr.AnyValues(label=f"support {message.inlier_share:.0%} inliers{tilt}"),
-            static=self._live is not None,
         )
 
     def _ground_truth(self, message: GroundTruth) -> None:

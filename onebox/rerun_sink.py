@@ -155,7 +155,7 @@ class Sink:
     """0: 9876 if free, else any free port."""
     web_port: int = 0
     """0: 9090 if free, else any free port."""
-    memory_limit: str = "4MiB"
+    memory_limit: str = "256KiB"
     """What the web server keeps for browsers that join late; static data is always kept."""
     overwrite: bool = False
     """Replace an existing --save file."""

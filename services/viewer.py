@@ -87,9 +87,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     settings.add(
         parser,
         "memory_limit",
-        "4MiB",
-        "what the web server replays to a browser that joins late (static data is always kept); "
-        "small, so a late page catches up in seconds",
+        "256KiB",
+        "what the web server keeps (as compressed) for a page that joins late, sent newest "
+        "first; static data is dropped last. Small, so a late page catches up in seconds",
     )
     settings.add(
         parser,
