@@ -924,12 +924,19 @@ def _shadowed_sides(
             )
 
 
-def _reaches_under(lower: _Plateau, upper: _Plateau, slack: float = 0.01) -> bool:
-    """Whether the lower top may go on under the upper box: it is no box (its extent is
-    unknown), its rectangle holds the upper's middle, or the upper's middle lies past one of
-    its hidden sides (a pallet's top seen as a strip in front of the cartons on it)."""
-    if not lower.is_box or lower.rect is None:
-        return True
+def _reaches_under(
+    lower: _Plateau, upper: _Plateau, slack: float = 0.01, exact: bool = False
+) -> bool:
+    """Whether the lower top may go on under the upper box: its extent is unknown (no
+    rectangle), its rectangle holds the upper's middle, or the upper lies past one of its
+    hidden sides and within that side's span (a strip of a box's top beside the box across
+    it; a pallet's top seen as a strip in front of the cartons on it). A top that a box
+    overhangs along the side (the next carton of a row, seen past its neighbour) does not
+    reach under it: a top standing beside is no base. A top that is no box may go on past any
+    side. ``exact``: only a box's top, past a hidden side whose span the upper's matches (the
+    upper hides the lower's top right across)."""
+    if lower.rect is None or (exact and not lower.is_box):
+        return not exact
     assert upper.rect is not None
     rect = lower.rect
     ax0, ax1 = rect.axis
@@ -937,13 +944,40 @@ def _reaches_under(lower: _Plateau, upper: _Plateau, slack: float = 0.01) -> boo
     ry = upper.rect.middle[1] - rect.middle[1]
     along, across = rx * ax0 + ry * ax1, ry * ax0 - rx * ax1
     hl, hw = rect.length_m / 2, rect.width_m / 2
-    if abs(along) <= hl + slack and abs(across) <= hw + slack:
+    if not exact and abs(along) <= hl + slack and abs(across) <= hw + slack:
         return True
-    for o0, o1 in rect.hidden_normals:
+    # A top that is no box may have any of its sides hidden (noise hides the rise).
+    sides = (
+        rect.hidden_normals
+        if lower.is_box
+        else ((ax0, ax1), (-ax0, -ax1), (-ax1, ax0), (ax1, -ax0))
+    )
+    for o0, o1 in sides:
         half_out, half_side = (hl, hw) if abs(o0 * ax0 + o1 * ax1) > 0.7 else (hw, hl)
-        if rx * o0 + ry * o1 >= half_out - slack and abs(ry * o0 - rx * o1) <= half_side + slack:
+        if rx * o0 + ry * o1 < half_out - slack:
+            continue
+        # The upper's half extent along the side, which must lie within the side's span.
+        reach = _half_extent(upper.rect, -o1, o0)
+        room = half_side + max(slack, 0.1 * reach)
+        if abs(ry * o0 - rx * o1) + reach <= room and (
+            not exact
+            or (
+                half_side <= reach + max(slack, 0.1 * reach)
+                # ... and the strip is narrower than the box across it (the next carton of
+                # a row of the same depth is a whole top of its own).
+                and half_out < 0.6 * _half_extent(upper.rect, o0, o1)
+            )
+        ):
             return True
     return False
+
+
+def _half_extent(rect: Rectangle, d0: float, d1: float) -> float:
+    """Half a rectangle's extent along the unit direction (d0, d1)."""
+    a0, a1 = rect.axis
+    return 0.5 * (
+        abs(rect.length_m * (a0 * d0 + a1 * d1)) + abs(rect.width_m * (a1 * d0 - a0 * d1))
+    )
 
 
 def _bases(
@@ -1062,6 +1096,12 @@ def _bases(
     per_side = match.reshape(len(pair_l), 4, -1).sum(axis=2) >= 2
     across[pair_l, pair_b] = (per_side[:, 0] & per_side[:, 1]) | (per_side[:, 2] & per_side[:, 3])
     seen_ok = allowed & (matches >= 2) & ((matches >= 0.75 * (matches + lowers)) | across)
+    # A top seen as a strip beside the box, the box right across the strip's hidden side
+    # (a small carton turned across a larger one): past the box's other sides lies lower.
+    for j, i in zip(*np.nonzero(allowed & (matches >= 2) & ~seen_ok), strict=True):
+        level = levels[j]
+        if level is not None and _reaches_under(level, boxes[i], exact=True):
+            seen_ok[j, i] = True
     # A ledge found right past the box's own outline needs less: a rim of the box under it is
     # often narrower than the foot's probe along some sides (the upper box turned on it).
     own_ok = (owner[:, np.newaxis] >= 0) & (matches >= 3)
@@ -1072,6 +1112,19 @@ def _bases(
         ok = np.flatnonzero(seen_ok[:, i])
         if len(ok):
             j = int(ok[np.argmax(level_h[ok])])
+            # Of the levels at that height, a box's top (the strip of a carton across which
+            # the box lies, not the sliver of a seam beside it), then the most seen.
+            near = ok[np.abs(level_h[ok] - level_h[j]) < level_tol[j]]
+            if len(near) > 1:
+                j = int(
+                    max(
+                        near,
+                        key=lambda k: (
+                            levels[k] is not None and levels[k].is_box,  # type: ignore[union-attr]
+                            matches[k, i],
+                        ),
+                    )
+                )
             if owner[j] >= 0:
                 # The ledge is the top of a box the box stands on, when one is at its height.
                 same = np.flatnonzero(
