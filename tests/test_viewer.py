@@ -280,3 +280,33 @@ def test_honcho_start_with_viewer_false_runs_without_a_viewer(tmp_path):
     assert "camera/points" in done.stdout and "detections" in done.stdout
     assert "viewer.1 stopped" in out, "the idle viewer stayed up until honcho stopped it"
     assert "Traceback" not in out
+
+
+def test_a_live_page_gets_fewer_smaller_pictures_and_the_pose_once(tmp_path):
+    """Live: pictures once a simulated second at half size under a halved lens, boxes with
+    every capture, the unmoving camera's pose once and static."""
+    out = tmp_path / "live.rrd"
+    rec = rr.RecordingStream("onebox_test")
+    rec.save(out)
+    with rec:
+        scene = rerun_scene.SceneLog(rec, jpeg=False, live=rerun_scene.Live(picture_hz=1, scale=2))
+        for i in range(1, 7):
+            for key, message in capture(i * 200_000_000).items():
+                scene.log(key, message)
+    held = contents(out)
+    seconds = {
+        name: sorted(t.total_seconds() for t in held[name].get("_times", []))
+        for name in ("/world/camera/image/rgb", "/world/camera/image/depth", "/world/detections")
+    }
+    assert seconds["/world/camera/image/rgb"] == [0.2, 1.2]
+    assert seconds["/world/camera/image/depth"] == [0.2, 1.2]
+    assert seconds["/world/detections"] == [0.2, 0.4, 0.6, 0.8, 1.0, 1.2]
+    assert held["/world/camera/image/rgb"]["Image:format"][0]["width"] == 160
+    assert held["/world/camera/image/depth"]["DepthImage:format"][0]["width"] == 160
+    pinhole = held["/world/camera/image"]
+    assert pinhole["Pinhole:resolution"][0] == [160, 120]
+    k = np.asarray(pinhole["Pinhole:image_from_camera"][0]).reshape(3, 3).T
+    assert k[0, 2] == pytest.approx(80) and k[1, 2] == pytest.approx(60)
+    assert k[0, 0] == pytest.approx(160 / 2 / np.tan(np.radians(30)), rel=1e-5)
+    assert "_times" not in held["/world/camera"], "the pose is static"
+    assert held["/world/camera"]["Transform3D:translation"][0] == pytest.approx([0, 0, 0.4])
