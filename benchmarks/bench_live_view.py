@@ -324,9 +324,9 @@ def main() -> None:
                     raise SystemExit(f"the viewer served nothing on 127.0.0.1:{web_port}")
                 time.sleep(0.2)
             url = f"http://127.0.0.1:{web_port}/?url=rerun%2Bhttp://127.0.0.1:{grpc_port}/proxy"
-            newest = published.newest_ns() or 0
+            at_open = published.newest_ns() or 0
             print(
-                f"pipeline from {args.repo} up {args.late_s:.0f} s, sim at {newest / 1e9:.1f} s; opening {url}",
+                f"pipeline from {args.repo} up {args.late_s:.0f} s, sim at {at_open / 1e9:.1f} s; opening {url}",
                 flush=True,
             )
             with tempfile.TemporaryDirectory() as profile:
@@ -431,8 +431,10 @@ def summarise(args: argparse.Namespace, rows: list[dict[str, object]], loads: li
             f"first sim time shown after {seen[0]['t']:.1f} s, {seen[0]['behind_wall_s']:.1f} s behind"
         )
         settled = [
-            float(r["behind_wall_s"]) for r in seen if float(r["t"]) >= min(30.0, args.watch_s / 2)
-        ]  # type: ignore[arg-type]
+            float(r["behind_wall_s"])  # type: ignore[arg-type]
+            for r in seen
+            if float(r["t"]) >= min(30.0, args.watch_s / 2)  # type: ignore[arg-type]
+        ]
         if settled:
             print(
                 f"behind (wall) from {min(30.0, args.watch_s / 2):.0f} s on: median {median(settled):.2f} s, worst {max(settled):.2f} s, last {settled[-1]:.2f} s"

@@ -241,7 +241,8 @@ def shrink_rgb(rgb: npt.NDArray[np.uint8], n: int) -> npt.NDArray[np.uint8]:
         return rgb
     h, w = rgb.shape[0] // n * n, rgb.shape[1] // n * n
     blocks = rgb[:h, :w].reshape(h // n, n, w // n, n, -1).astype(np.uint16)
-    return (blocks.mean(axis=(1, 3)) + 0.5).astype(np.uint8)
+    shrunk: npt.NDArray[np.uint8] = (blocks.mean(axis=(1, 3)) + 0.5).astype(np.uint8)
+    return shrunk
 
 
 def pinhole_matrix(k: list[float]) -> npt.NDArray[np.float64]:
