@@ -664,7 +664,10 @@ class SceneLog:
         if self._unchanged(GROUND_TRUTH, centres, sizes, [q.xyzw for q in quats]):
             return
         if not truth:
-            self.rec.log(GROUND_TRUTH, rr.Clear(recursive=True), static=self._live is not None)
+            if self._live is None:
+                self.rec.log(GROUND_TRUTH, rr.Clear(recursive=True))
+            else:  # static: no boxes (a static Clear would hide every later static box too)
+                self.rec.log(GROUND_TRUTH, rr.Boxes3D(centers=[], half_sizes=[]), static=True)
             return
         self.rec.log(
             GROUND_TRUTH,

@@ -16,7 +16,10 @@ from onebox.keys import type_for_key
 from onebox.testing.fake_capture import BOX_CENTRE, BOX_SIZE, capture, tf_static, write_mcap
 from onebox.testing.processes import CAPTURE, ROOT, free_port, honcho_env, wait_for_output
 from onebox.testing.rrd import contents
-from schemas import Detection3DArray, Image, TFMessage, codec
+from schemas import Detection3DArray, GroundTruth, Image, TFMessage, codec
+from schemas.base import Header
+from schemas.geometry import Pose, Vector3
+from schemas.sim import BoxTruth
 
 
 def publish_until_exit(test_bus, proc: subprocess.Popen[str], camera: str = "camera") -> None:
@@ -293,7 +296,14 @@ def test_a_live_page_gets_fewer_smaller_pictures_and_the_pose_once(tmp_path):
         for i in range(1, 7):
             for key, message in capture(i * 200_000_000).items():
                 scene.log(key, message)
+            header = Header(stamp_ns=i * 200_000_000, frame_id="world")
+            box = BoxTruth(
+                pose=Pose(position=Vector3(x=0.1, z=0.03)), size=Vector3(x=0.06, y=0.06, z=0.06)
+            )
+            scene.log("sim/ground_truth", GroundTruth(header=header, boxes=[box]))
     held = contents(out)
+    assert "_times" not in held["/world/ground_truth"], "the unmoving true box: static, once"
+    assert held["/world/ground_truth"]["Boxes3D:centers"][0] == pytest.approx([0.1, 0, 0.03])
     seconds = {
         name: sorted(t.total_seconds() for t in held[name].get("_times", []))
         for name in ("/world/camera/image/rgb", "/world/camera/image/depth", "/world/detections")
