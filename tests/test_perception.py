@@ -185,6 +185,24 @@ def test_touching_cartons_split_by_colour():
         assert box.size[0] == pytest.approx(0.1, abs=0.004)
 
 
+@pytest.mark.parametrize("distance_m", [0.6, 1.2])
+def test_wide_seam_band_split_down_its_middle(distance_m):
+    """Cartons of one height with 5 mm dark lines round their tops (a 10 mm band between two):
+    the band is shared between the tops beside it, so each keeps its full size."""
+    plane = Plane()
+    a = box_on(plane, -0.05, 0.0, (0.1, 0.08, 0.06), 0.0, colour=(180, 140, 90))
+    b = box_on(plane, 0.05, 0.0, (0.1, 0.08, 0.06), 0.0, colour=(150, 115, 70))
+    c = box_on(plane, 0.0, 0.08, (0.2, 0.08, 0.06), 0.0, colour=(170, 130, 80))
+    camera = Camera.tilted(distance_m, 10.0, width=640, height=480)
+    depth, colour = render(Scene(camera, plane, (a, b, c), seam_m=0.005))
+    found = find_boxes(depth, camera.lens, camera.camera_to_world, colour)
+    assert len(found.boxes) == 3
+    for box, true in match(found.boxes, (a, b, c)):
+        assert box.size[0] == pytest.approx(true.size[0], abs=0.0025 * distance_m / 0.4)
+        assert box.size[1] == pytest.approx(true.size[1], abs=0.0025 * distance_m / 0.4)
+        assert math.dist(box.centre, true.centre) < 0.002 * distance_m / 0.4
+
+
 @pytest.mark.parametrize("tilt_deg", [0.0, 25.0])
 def test_without_pose_sizes_match(tilt_deg):
     """No pose: the camera-frame answer has the same sizes, and the support faces the camera."""

@@ -20,7 +20,8 @@ How a picture is read (whole-array work; Python loops only over tops, a few scal
    (:mod:`onebox.perception.segment`). Every piece's top height at once: the fullest window of
    a per-piece height histogram (window = the tolerance, 3 sigma(z), at least 1.5 mm), then the
    mean of the readings within the tolerance. Tops grow back into cut pixels and small pieces
-   at their height (3 pixels, the larger top first).
+   at their height (3 pixels, the larger top first), and across bands (a seam's line cut out
+   by colour edges on both sides, under ~1 cm wide) until they meet in the band's middle.
 4. All tops measured together from their grouped pixels: area (holes filled by each row's and
    column's span), the top's plane (moments on a sample), the outline and, for each outline
    pixel, what lies past it: rising (hidden by something standing on or in front of the top),
@@ -70,6 +71,11 @@ TOP_TOLERANCE_FLOOR_M = 0.0015
 """The least height tolerance of a top: a renderer's depth is good to a few tenths of a mm."""
 GROW_PX = 3
 """How far a top grows back into cut pixels and fragments: a colour edge cuts ~2 pixels."""
+BAND_M = 0.005
+"""A piece between colour edges narrower than about twice this is a band (a seam's line),
+not a top: the tops beside it at its height grow across it and meet in its middle."""
+BAND_MAX_PX = 6
+"""The widest band, in pixels on either side of its middle line."""
 CROSS = ndimage.generate_binary_structure(2, 1)
 
 
@@ -297,8 +303,10 @@ def _plateaus(
         with np.errstate(invalid="ignore"):
             stand &= h < np.float32(settings.max_height_m)
     cut = segment.breaks(h, step)
+    colour_cut: BoolArray | None = None
     if colour is not None:
-        cut |= np.pad(segment.colour_breaks(colour[crop], settings.colour_step), pad)
+        colour_cut = np.pad(segment.colour_breaks(colour[crop], settings.colour_step), pad)
+        cut |= colour_cut
     labels, count = ndimage.label(stand & ~cut)
     if count == 0:
         return [], height, labels_top
@@ -336,11 +344,23 @@ def _plateaus(
     on_level = np.abs(p_h - level[p_top]) < tol[p_top]
     top_lab = np.zeros(h.shape, dtype=np.int32)
     top_flat = top_lab.reshape(-1)
-    top_flat[p_idx[on_level]] = p_top[on_level] + 1
     small = np.zeros(count + 1, dtype=bool)
     small[1:] = areas[1:] < least
     candidates = np.concatenate([np.flatnonzero(stand.reshape(-1) & (flat == 0)), idx[small[lab]]])
-    _grow(top_flat, candidates, h_flat, level, tol, width_p)
+    band = np.zeros(tops_n, dtype=bool)
+    if colour_cut is not None:
+        pixels = np.bincount(lab, minlength=count + 1)
+        band = _bands(labels, h, big, pixels, float(np.nanmin(d)) / lens.fx)
+    in_band = band[p_top]
+    seated = on_level & ~in_band
+    top_flat[p_idx[seated]] = p_top[seated] + 1
+    _grow(top_flat, candidates, h_flat, level, tol, width_p, p_idx[in_band])
+    if band.any():
+        # A band no top at its height reaches is an object of its own (a narrow box).
+        taken = np.bincount(p_top[in_band], weights=top_flat[p_idx[in_band]] > 0, minlength=tops_n)
+        alone = band & (taken == 0)
+        back = alone[p_top] & on_level
+        top_flat[p_idx[back]] = p_top[back] + 1
     tops = _Tops.gather(top_lab, tops_n, PAD, (r0, c0))
     labels_top[crop] = top_lab[PAD:-PAD, PAD:-PAD]
     plateaus = _measure_all(
@@ -396,6 +416,47 @@ def _levels(
     return result
 
 
+def _bands(
+    labels: npt.NDArray[np.int32],
+    h: Float32Array,
+    big: npt.NDArray[np.intp],
+    counts: npt.NDArray[np.intp],
+    footprint_m: float,
+) -> BoolArray:
+    """Which tops (pieces ``big``, in order) are only bands: a seam's dark line between two
+    cartons, cut out along both sides by colour edges. Nothing of a band is left once it
+    shrinks by a few pixels (BAND_M), and it runs along a carton's side, many times longer
+    than it is wide (a short thin piece is a strip of something else, such as a box mostly
+    hidden under another). A pixel with no reading is no edge: dropout does not thin a top."""
+    k = min(max(math.ceil(BAND_M / max(footprint_m, 1e-6)), 2), BAND_MAX_PX)
+    band = np.zeros(len(big), dtype=bool)
+    slices = ndimage.find_objects(labels)
+    rows_n, cols_n = labels.shape
+    for t, piece in enumerate(big):
+        where = slices[piece - 1]
+        if where is None:
+            continue
+        tall, wide = where[0].stop - where[0].start, where[1].stop - where[1].start
+        # A band holds at most 2k pixels across its length; seams round and between cartons
+        # join in rings and grids, up to about twice round their bounding box.
+        if max(tall, wide) < 8 * k or counts[piece] > 3 * k * (tall + wide):
+            continue
+        rs = slice(max(where[0].start - 1, 0), min(where[0].stop + 1, rows_n))
+        cs = slice(max(where[1].start - 1, 0), min(where[1].stop + 1, cols_n))
+        alive = (labels[rs, cs] == piece) | np.isnan(h[rs, cs])
+        for _ in range(k):
+            core = alive.copy()
+            core[:, :-1] &= alive[:, 1:]
+            core[:, 1:] &= alive[:, :-1]
+            core[:-1] &= alive[1:]
+            core[1:] &= alive[:-1]
+            core[[0, -1], :] = False
+            core[:, [0, -1]] = False
+            alive = core
+        band[t] = not (alive & (labels[rs, cs] == piece)).any()
+    return band
+
+
 def _grow(
     top_flat: npt.NDArray[np.int32],
     candidates: npt.NDArray[np.intp],
@@ -403,12 +464,22 @@ def _grow(
     level: Float64Array,
     tol: Float64Array,
     width: int,
+    bands: npt.NDArray[np.intp] | None = None,
 ) -> None:
-    """Tops grow back into cut pixels and small pieces at their height, GROW_PX pixels; where
-    two tops reach one pixel the larger (lower index) takes it."""
+    """Tops grow back into cut pixels and small pieces at their height, GROW_PX pixels, and
+    on across ``bands`` (a seam's line between colour edges) until they meet; where two tops
+    reach one pixel the larger (lower index) takes it, so a band splits down its middle."""
+    reach = GROW_PX
+    if bands is not None and len(bands):
+        candidates = np.concatenate([candidates, bands])
+        reach = 4 * BAND_MAX_PX
     heights = h_flat[candidates]
+    free = np.zeros(len(candidates), dtype=bool)
+    free[len(candidates) - (0 if bands is None else len(bands)) :] = True
     none = np.int32(np.iinfo(np.int32).max)
-    for _ in range(GROW_PX):
+    for step in range(reach):
+        if step == GROW_PX:
+            candidates, heights, free = candidates[free], heights[free], free[free]
         if len(candidates) == 0:
             return
         best = np.full(len(candidates), none, dtype=np.int32)
@@ -420,9 +491,11 @@ def _grow(
         fits = np.abs(heights[take] - level[which]) < tol[which]
         take, which = take[fits], which[fits]
         top_flat[candidates[take]] = which + 1
+        if len(take) == 0:
+            return
         keep = np.ones(len(candidates), dtype=bool)
         keep[take] = False
-        candidates, heights = candidates[keep], heights[keep]
+        candidates, heights, free = candidates[keep], heights[keep], free[keep]
 
 
 @dataclass
