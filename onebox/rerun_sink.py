@@ -156,7 +156,8 @@ class Sink:
     web_port: int = 0
     """0: 9090 if free, else any free port."""
     memory_limit: str = "256KiB"
-    """What the web server keeps for browsers that join late; static data is always kept."""
+    """What the web server keeps (compressed) for pages that join late, sent to them newest
+    first; static data is dropped only when it alone is over the limit."""
     overwrite: bool = False
     """Replace an existing --save file."""
 
