@@ -81,11 +81,21 @@ def choose_port(port: int, usual: int, flag: str) -> int:
                 f"{flag}, or 0 for any free port"
             )
         return port
-    if _port_free(usual):
-        return usual
+    return usual if _port_free(usual) else any_free_port()
+
+
+def any_free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
+
+
+SETTLE_S = 1.0
+"""How long a freshly started web server must stay up before its ports are taken as its own."""
+
+
+class PortTaken(OneboxError):
+    """The web server's port was taken by someone else as it started."""
 
 
 def _wait_for_port(port: int, proc: subprocess.Popen[bytes], timeout_s: float) -> None:
@@ -127,6 +137,15 @@ def web_server(grpc_port: int, web_port: int, memory_limit: str) -> Iterator[str
     try:
         _wait_for_port(grpc_port, proc, timeout_s=20.0)
         _wait_for_port(web_port, proc, timeout_s=20.0)
+        # Another viewer starting at the same moment may have taken the port between our
+        # check and the server's bind: then the port answers, but not for our server, which
+        # exits at once. Give it that moment before trusting the port.
+        try:
+            proc.wait(timeout=SETTLE_S)
+        except subprocess.TimeoutExpired:
+            pass
+        else:
+            raise PortTaken(f"the Rerun web server could not listen on {grpc_port} or {web_port}")
         yield f"rerun+http://127.0.0.1:{grpc_port}/proxy"
     finally:
         proc.terminate()
@@ -135,6 +154,30 @@ def web_server(grpc_port: int, web_port: int, memory_limit: str) -> Iterator[str
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
+
+
+@contextlib.contextmanager
+def serve_web(sink: Sink, attempts: int = 3) -> Iterator[tuple[str, int, int]]:
+    """The web server on the sink's ports; a port left to choose (0) that another viewer took
+    at the same moment is chosen again. Yields the gRPC address and both ports."""
+    for attempt in range(attempts):
+        grpc_port = choose_port(sink.grpc_port, DEFAULT_GRPC_PORT, "--grpc-port")
+        web_port = choose_port(sink.web_port, DEFAULT_WEB_PORT, "--web-port")
+        if attempt:  # the usual ports lost a race once: take any free ones now
+            grpc_port = sink.grpc_port or any_free_port()
+            web_port = sink.web_port or any_free_port()
+        try:
+            with web_server(grpc_port, web_port, sink.memory_limit) as url:
+                yield url, grpc_port, web_port
+                return
+        except PortTaken:
+            if (sink.grpc_port and sink.web_port) or attempt == attempts - 1:
+                raise
+            log.info(
+                "port %d or %d was taken as the web server started; trying others",
+                grpc_port,
+                web_port,
+            )
 
 
 def web_address(grpc_port: int, web_port: int) -> str:
@@ -186,9 +229,7 @@ def open_recording(sink: Sink) -> Iterator[rr.RecordingStream]:
             rec.spawn(port=port, default_blueprint=blueprint)
             print("viewer: opened the Rerun viewer", flush=True)
         else:
-            grpc_port = choose_port(sink.grpc_port, DEFAULT_GRPC_PORT, "--grpc-port")
-            web_port = choose_port(sink.web_port, DEFAULT_WEB_PORT, "--web-port")
-            url = stack.enter_context(web_server(grpc_port, web_port, sink.memory_limit))
+            url, grpc_port, web_port = stack.enter_context(serve_web(sink))
             rec.connect_grpc(url, default_blueprint=blueprint)
             print(f"viewer: no display; open {web_address(grpc_port, web_port)}", flush=True)
         try:
