@@ -333,3 +333,26 @@ def test_pallet_margin_under_rows_of_two_heights():
     for box, true in match(found.boxes, tuple(cartons)):
         assert box.size[2] == pytest.approx(true.size[2], abs=0.01)
         assert math.dist(box.centre, true.centre) <= 0.010
+
+
+@pytest.mark.parametrize("sigma_m", [0.0, 0.001])
+def test_box_on_a_box_beside_one_of_the_same_height(sigma_m):
+    """A box standing off the middle of a box of almost its footprint, the lower box touching
+    a box of its own height (so no level of its own shows), and a box overhanging a wider box
+    whose strip shows only past its side face: both measured from the box under them."""
+    rng = np.random.default_rng(13)
+    beside = box_on(Plane(), 0.0, -0.19, (0.38, 0.37, 0.35), 0.0, (120, 170, 90))
+    lower = box_on(Plane(), 0.027, 0.023, (0.131, 0.046, 0.35), 0.0, (40, 90, 200))
+    upper = box_on(lower, 0.035, 0.007, (0.118, 0.041, 0.386), 0.0, (190, 150, 100))
+    wide = box_on(Plane(), -0.33, -0.09, (0.292, 0.192, 0.21), 90.0, (200, 80, 60))
+    on_wide = box_on(wide, -0.028, 0.002, (0.196, 0.173, 0.192), 90.0, (90, 200, 200))
+    camera = Camera.looking_at((-1.1, -0.95, 2.2), (0.0, 0.0, 0.0), 640, 480, 60)
+    shapes = (beside, lower, upper, wide, on_wide)
+    depth, colour = render(Scene(camera, Plane(), shapes))
+    if sigma_m:
+        depth = add_noise(depth, Noise(sigma_m=sigma_m), rng)
+    found = find_boxes(depth, camera.lens, camera.camera_to_world, colour)
+    for true in (upper, on_wide):
+        box = min(found.boxes, key=lambda f: math.dist(f.top_middle, true.top_middle))
+        assert math.dist(box.top_middle, true.top_middle) < 0.01
+        assert box.size[2] == pytest.approx(true.size[2], abs=0.003 + 3 * sigma_m)

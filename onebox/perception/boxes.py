@@ -1019,6 +1019,10 @@ def _reaches_under(
     hl, hw = rect.length_m / 2, rect.width_m / 2
     if not exact and abs(along) <= hl + slack and abs(across) <= hw + slack:
         return True
+    if not exact and not lower.is_box and _touch(lower, upper):
+        # A top that is no box is seen only in part (the box on it hides the rest, and the
+        # box's own side face seen at a slant): touching is enough; the probes decide.
+        return True
     # A top that is no box may have any of its sides hidden (noise hides the rise).
     sides = (
         rect.hidden_normals
@@ -1166,8 +1170,17 @@ def _bases(
     foot_lowers[pair_l, pair_b] = (lower & (first[..., 0] == 0)).sum(axis=1)
     # A level counts when it is seen on at least two probes and hardly anything lower is, or
     # on two opposite sides (a box across a narrower one: past its other sides lies lower).
-    per_side = match.reshape(len(pair_l), 4, -1).sum(axis=2) >= 2
+    side_match = match.reshape(len(pair_l), 4, -1).sum(axis=2)
+    side_lower = lower.reshape(len(pair_l), 4, -1).sum(axis=2)
+    per_side = side_match >= 2
     across[pair_l, pair_b] = (per_side[:, 0] & per_side[:, 1]) | (per_side[:, 2] & per_side[:, 3])
+    # ... or, a level that is no whole box's top, on two sides or more, more often than
+    # anything lower there: the rim of the box under it, a few pixels wide, or a strip of it
+    # seen past the box's side face (the box overhangs it, or stands off its middle, past the
+    # other sides). A whole box's top beside the box is no sign of what it stands on.
+    sides_seen = ((side_match >= 1) & (side_match >= side_lower)).sum(axis=1)
+    partial = np.array([level is None or not level.is_box for level in levels])
+    across[pair_l, pair_b] |= (sides_seen >= 2) & (side_match.sum(axis=1) >= 3) & partial[pair_l]
     seen_ok = allowed & (matches >= 2) & ((matches >= 0.75 * (matches + lowers)) | across)
     # A top seen as a strip beside the box, the box right across the strip's hidden side
     # (a small carton turned across a larger one): past the box's other sides lies lower.
