@@ -76,6 +76,11 @@ BAND_M = 0.005
 not a top: the tops beside it at its height grow across it and meet in its middle."""
 BAND_MAX_PX = 6
 """The widest band, in pixels on either side of its middle line."""
+HIDDEN_BAND_M = 0.01
+"""A box whose hidden side is hidden by something standing off it by more than this (and
+three footprints) has an unknown extent: it is left out."""
+HIDDEN_SHARE = 0.5
+"""... and by more than this share of the top's seen extent across the hidden side."""
 CROSS = ndimage.generate_binary_structure(2, 1)
 
 
@@ -173,6 +178,10 @@ class _Plateau:
     """Stands on a platform (a pallet's top), where cartons stand packed side by side."""
     ledge_m: float | None = None
     """The highest flat level seen just past the top's outline (see :func:`_ledges`)."""
+    hidden_band_m: float = 0.0
+    """How far, along the support, what rises past the top's hidden outline stands off it
+    (median over the hidden outline): a wall rising at the top's edge stands at it, a taller
+    object in front of the top hides a band this wide of it."""
 
 
 @functools.lru_cache(maxsize=8)
@@ -238,7 +247,7 @@ def find_boxes(
     boxes = [p for p in plateaus if p.is_box]
     _bases(boxes, plateaus, height_m, labels_top, lens, support, settings)
     _shadowed_sides(boxes, support.offset_camera_m, settings)
-    reported = [b for b in boxes if not b.platform]
+    reported = [b for b in boxes if not b.platform and not _extent_unknown(b)]
     return Found(support, _report(reported, support, basis, camera_to_world, settings), frame)
 
 
@@ -647,12 +656,29 @@ def _measure_all(
     # Drop: past the pixel the surface is seen well below the top: a real edge, not a shadow.
     drop = np.zeros(len(edge), dtype=bool)
     e_low = level[e_top] - np.maximum(1.5 * tol[e_top], 0.005)
+    # For hidden outline points, how far along the support the nearest rising point past it
+    # lies from it.
+    stand_off = np.full(len(edge), np.inf)
     for offset in offsets:
         off = label_at[e_flat + offset] != e_top + 1
         beyond = h_flat[e_flat + offset]
         rise = np.fmax(np.fmax(beyond, h_flat[e_flat + 2 * offset]), h_flat[e_flat + 3 * offset])
         with np.errstate(invalid="ignore"):
-            hidden |= off & (rise > e_level)
+            risen = off & (rise > e_level)
+        hidden |= risen
+        at = np.flatnonzero(risen)
+        for k in (1, 2, 3):
+            f = e_flat[at] + k * offset
+            with np.errstate(invalid="ignore"):
+                up = h_flat[f] > e_level[at]
+            f, on = f[up], at[up]
+            r, c = np.divmod(f, tops.width)
+            df = d_flat[f].astype(np.float64)
+            xf = across[c + tops.shift[1]] * df
+            yf = down[r + tops.shift[0]] * df
+            pa = basis[0, 0] * xf + basis[0, 1] * yf + basis[0, 2] * df
+            pb = basis[1, 0] * xf + basis[1, 1] * yf + basis[1, 2] * df
+            stand_off[on] = np.fmin(stand_off[on], np.hypot(pa - a[on], pb - b[on]))
         unsure |= off & np.isnan(beyond)
         with np.errstate(invalid="ignore"):
             drop |= off & (np.fmin(beyond, h_flat[e_flat + 2 * offset]) < e_low)
@@ -711,6 +737,10 @@ def _measure_all(
             float(area[t]),
         )
         p.ledge_m = None if np.isnan(ledge[t]) else float(ledge[t])
+        part = slice(int(edge_starts[t]), int(edge_stops[t]))
+        bands = stand_off[part][hidden[part]]
+        bands = bands[np.isfinite(bands)]
+        p.hidden_band_m = float(np.median(bands)) if len(bands) else 0.0
         plateaus.append(p)
         rect = rects[t]
         if not eligible[t] or rect is None:
@@ -995,6 +1025,29 @@ def _shadowed_sides(
                 length_m=float(length),
                 width_m=float(width),
             )
+
+
+def _extent_unknown(box: _Plateau) -> bool:
+    """Whether a box's top may go on far past what is seen: a side is hidden, and what hides
+    it stands well off the top's edge (a taller object between the top and the camera hides
+    a band of the top, which may go on under it by as much), by more than half the top's seen
+    extent across that side. Such a top's size says little (a carton 13 % seen is reported a
+    quarter of its length), so it is not reported as a box. A wall rising at the edge (a
+    taller box beside, touching) hides nothing; a band narrow beside the seen extent leaves
+    the size a close lower bound (``Box.hidden_sides``); on a platform, cartons stand packed
+    and the side runs halfway into the shadow (:func:`_shadowed_sides`)."""
+    rect = box.rect
+    assert rect is not None
+    band = box.hidden_band_m
+    if rect.hidden_sides == 0 or box.on_platform:
+        return False
+    if band <= max(3.0 * box.footprint_m, HIDDEN_BAND_M):
+        return False
+    for n0, n1 in rect.hidden_normals:
+        seen = _half_extent(rect, n0, n1) * 2.0
+        if band > HIDDEN_SHARE * seen:
+            return True
+    return False
 
 
 def _reaches_under(
