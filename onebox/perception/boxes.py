@@ -43,6 +43,8 @@ How a picture is read (whole-array work; Python loops only over tops, a few scal
    box. On a platform, a side in the shadow of a taller carton between it and the camera runs
    halfway into the shadow (packed cartons touch; the shadow's middle is never off by more
    than half of it).
+   A top with a hidden side that something standing well off it (a taller object in front)
+   may hide by more than half its seen extent is left out: its size is unknown.
 7. The height is the top's distance from its base; the centre is the rectangle's middle less
    half the height along the normal.
 """
