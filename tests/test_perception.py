@@ -276,6 +276,30 @@ def test_pallet_cartons_measured_from_the_pallet():
         assert box.size[1] == pytest.approx(min(true.size[:2]), abs=0.015)
 
 
+@pytest.mark.parametrize("seed", [2, 9])
+def test_pallet_carton_not_measured_from_its_own_side_face(seed):
+    """The same pallet, Azure Kinect noise: the strip of a tall carton's side face seen at a
+    slant in the gap before it (between the lower carton's top and its own) is no level it
+    stands on; every carton's height is its own."""
+    rng = np.random.default_rng(1)
+    pallet = box_on(Plane(), 0.0, 0.0, (1.2, 1.0, 0.15), 0.0, (120, 90, 60))
+    cartons = []
+    for row in range(3):
+        for col in range(4):
+            size = (0.28, 0.3 if row == 1 else 0.25, (0.2, 0.3, 0.25)[(row + col) % 3])
+            colour = tuple(int(v) for v in rng.integers(120, 220, 3))
+            cartons.append(
+                box_on(pallet, (col - 1.5) * 0.285, (row - 1) * 0.3, size, 0.0, colour)  # type: ignore[arg-type]
+            )
+    camera = Camera.tilted(2.0, 10.0, width=640, height=480, hfov_deg=56.0)
+    depth, colour = render(Scene(camera, Plane(), (pallet, *cartons)))
+    noisy = add_noise(depth, Noise.kinect(), np.random.default_rng(seed))
+    found = find_boxes(noisy, camera.lens, camera.camera_to_world, colour)
+    assert len(found.boxes) == len(cartons)
+    for box, true in match(found.boxes, tuple(cartons)):
+        assert box.size[2] == pytest.approx(true.size[2], abs=0.01)
+
+
 def test_large_picture_read_at_every_second_pixel():
     """1280 x 720 is read as 640 x 360 (the lens scaled exactly): noise-free answers hold."""
     rng = np.random.default_rng(3)

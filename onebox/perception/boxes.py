@@ -36,7 +36,9 @@ How a picture is read (whole-array work; Python loops only over tops, a few scal
    the box itself, nothing higher in front) says whether the level is there or lower. A level
    counts when seen on two probes with hardly anything lower seen, or on two opposite sides;
    a lower top counts only if it reaches under the box (its rectangle holds the box's middle,
-   it is no box, or the box lies past one of its hidden sides). The highest such level is the
+   it is no box, or the box lies past one of its hidden sides); a piece that is no box and
+   lies largely inside the box's rectangle is the box's own side face seen at a slant (nothing
+   under a box's top is seen), never its base. The highest such level is the
    base; a box that sees none takes the base most of its touching neighbours have, else the
    platform it stands over, else the support. A top that boxes stand on past its hidden side,
    or that is mostly covered, is a platform (a pallet's top): a level, never reported as a
@@ -1157,6 +1159,7 @@ def _bases(
         for i, box in enumerate(boxes):
             if allowed[j, i]:
                 allowed[j, i] = _reaches_under(level, box)
+    _own_faces(allowed, levels, boxes, height_m, labels_top, lens, support, cam)
     # Only the pairs (level, box) that may be the box's base are probed.
     pair_l, pair_b = np.nonzero(allowed)
     probes = np.stack([_probes(box) for box in boxes])  # boxes x lines x reaches x 2
@@ -1310,6 +1313,63 @@ def _bases(
             box.on_platform = True
         elif level is not None and level.is_box:
             box.on_plateau = level.label
+
+
+OWN_FACE_SHARE = 1.0 / 3.0
+"""A piece below a box with more than this share of its readings inside the box's rectangle is
+the box's own side face: nothing under a box's top can be seen."""
+
+
+def _own_faces(
+    allowed: BoolArray,
+    levels: list[_Plateau | None],
+    boxes: list[_Plateau],
+    height_m: Float32Array,
+    labels_top: npt.NDArray[np.int32],
+    lens: Intrinsics,
+    support: Support,
+    cam: Float64Array,
+) -> None:
+    """A lower piece that is no box (a strip cut out between tops) is no base of a box when
+    much of it lies inside the box's rectangle: it is the box's own side face seen at a slant,
+    its readings between the box's top and what stands in front (or its edge's flying pixels),
+    not a level the box stands on, whose part under the box is hidden by the box itself."""
+    pieces = [
+        j
+        for j, level in enumerate(levels)
+        if level is not None and not level.is_box and allowed[j].any()
+    ]
+    if not pieces:
+        return
+    rows_n, cols_n = height_m.shape
+    slope = _slope(cols_n, rows_n, lens, support.normal_camera)
+    across, down = lens.rays(cols_n, rows_n)
+    where = ndimage.find_objects(labels_top)
+    for j in pieces:
+        level = levels[j]
+        assert level is not None
+        if level.label >= len(where) or where[level.label] is None:
+            continue
+        rs, cs = where[level.label]
+        v, u = np.nonzero(labels_top[rs, cs] == level.label + 1)
+        if len(v) == 0:
+            continue
+        v += rs.start
+        u += cs.start
+        d = (height_m[v, u] - support.offset_camera_m) / slope[v, u]
+        xyz = np.stack([across[u] * d, down[v] * d, d])
+        a, b = cam[0] @ xyz, cam[1] @ xyz
+        for i in np.flatnonzero(allowed[j]):
+            rect = boxes[i].rect
+            assert rect is not None
+            ax0, ax1 = rect.axis
+            ra, rb = a - rect.middle[0], b - rect.middle[1]
+            out = np.maximum(
+                np.abs(ra * ax0 + rb * ax1) - rect.length_m / 2,
+                np.abs(rb * ax0 - ra * ax1) - rect.width_m / 2,
+            )
+            if np.count_nonzero(out <= 0.0) > OWN_FACE_SHARE * len(v):
+                allowed[j, i] = False
 
 
 def _is_platform(lower: _Plateau, upper: _Plateau) -> bool:
