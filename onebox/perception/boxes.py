@@ -1250,6 +1250,18 @@ def _bases(
     # often narrower than the foot's probe along some sides (the upper box turned on it).
     own_ok = (owner[:, np.newaxis] >= 0) & (matches >= 3)
     own_ok &= matches >= 0.5 * (matches + foot_lowers)
+    # ... or seen on every line of one side, when no top beside is at its height: the rim of
+    # a box underneath that the upper one overhangs on its other sides.
+    whole_side = np.zeros(grid, dtype=bool)
+    whole_side[pair_l, pair_b] = (side_match >= len(PROBE_FRACTIONS)).any(axis=1)
+    top_hs = np.array([p.height_m for p in plateaus])
+    alone = np.array(
+        [
+            owner[j] >= 0 and not np.any(np.abs(top_hs - level_h[j]) < level_tol[j])
+            for j in range(len(levels))
+        ]
+    )
+    own_ok |= alone[:, np.newaxis] & whole_side
     seen_ok |= allowed & own_ok
     base: dict[int, int] = {}
     for i in range(len(boxes)):
