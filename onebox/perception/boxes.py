@@ -35,6 +35,8 @@ How a picture is read (whole-array work; Python loops only over tops, a few scal
    lower level (the support and every lower top); along each line the first surface seen (not
    the box itself, nothing higher in front) says whether the level is there or lower. A level
    counts when seen on two probes with hardly anything lower seen, or on two opposite sides;
+   the box's own ledge (a rim just past its outline) counts with less, and when seen on every
+   line of one side with no top at its height (a box underneath, overhung on the other sides);
    a lower top counts only if it reaches under the box (its rectangle holds the box's middle,
    it is no box, or the box lies past one of its hidden sides); a piece that is no box and
    lies largely inside the box's rectangle is the box's own side face seen at a slant (nothing
