@@ -17,7 +17,7 @@ import pytest
 from onebox import bus
 from onebox.recording import iter_messages
 from onebox.testing import fake_capture
-from onebox.testing.processes import Inbox
+from onebox.testing.processes import Inbox, wait_for_output
 from onebox.testing.synthetic import Scene, camera_info, depth_image, depth_picture, tf_static
 from schemas import (
     Header,
@@ -307,19 +307,22 @@ def test_record_keeps_every_sample_and_writes_a_file_that_reads_back(started, te
 
 
 def test_check_survives_everything_and_reports_the_valid_capture(processes, test_bus):
-    """check lists every key of the valid capture with its type, a lens and the detection,
-    exits 0, no traceback (which camera info it shows may be a hostile one that decodes)."""
+    """check, fed every kind of bad sample and then the valid capture, lists every key with its
+    type, the lens and the detection, exits 0, no traceback."""
     proc = processes.start("check", "--window-s", "3")
     samples = bad_samples([DEPTH, INFO, TF])
     capture = fake_capture.capture(5)
     valid = [(key, "valid", codec(type(m)).encode(m)) for key, m in capture.items()]
+    seen = wait_for_output(proc, "listening on", timeout_s=30)
+    publish_all(test_bus, samples[:60])
+    publish_all(test_bus, valid)
+    publish_all(test_bus, samples[60:])
+    # Then the valid capture until check's window closes, so the last of each key is valid.
     deadline = time.monotonic() + 30
     while proc.poll() is None and time.monotonic() < deadline:
-        publish_all(test_bus, samples[:60])
         publish_all(test_bus, valid)
-        publish_all(test_bus, samples[60:])
-        publish_all(test_bus, valid)
-    text = processes.stop(proc)
+        time.sleep(0.05)  # a camera's pace, not a synchronisation
+    text = seen + processes.stop(proc)
     assert proc.returncode == 0, text[-3000:]
     assert "Traceback" not in text
     listed = {line.split()[0]: line for line in text.splitlines() if line.startswith("  ")}

@@ -141,7 +141,10 @@ def test_the_secured_pipeline_finds_the_box(secure_router: str, cert_dir: Path) 
             wait_for_output(locator, "router", timeout_s=60)
             procs.start("sim", "--secure", str(cert_dir), "--frames", "100")
             try:
-                items = inbox.wait(has_key("detections"), timeout_s=60)
+                items = inbox.wait(
+                    lambda got: has_key("detections")(got) and has_key("sim/ground_truth")(got),
+                    timeout_s=60,
+                )
             except AssertionError as e:
                 raise AssertionError(f"{e}\nlocator said:\n{procs.stop(locator)}") from None
         found = codec(Detection3DArray).decode(next(p for k, p in items if k == "detections"))
