@@ -13,6 +13,7 @@ nothing behind, and an existing file is replaced only when asked to.
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import importlib.util
 import logging
@@ -203,6 +204,19 @@ class Sink:
     first; static data is dropped only when it alone is over the limit."""
     overwrite: bool = False
     """Replace an existing --save file."""
+
+    @classmethod
+    def from_args(cls, args: argparse.Namespace) -> Sink:
+        """The sink the viewer's and view's shared flags describe."""
+        return cls(
+            save=args.save,
+            web=args.web,
+            camera=args.camera,
+            grpc_port=args.grpc_port,
+            web_port=args.web_port,
+            memory_limit=args.memory_limit,
+            overwrite=args.overwrite,
+        )
 
 
 def _partial(path: Path) -> Path:

@@ -98,15 +98,7 @@ def log_file(path: Path, scene: rerun_scene.SceneLog, namespace: str, recover: b
 
 
 def main(args: argparse.Namespace) -> int:
-    sink = rerun_sink.Sink(
-        save=args.save,
-        web=args.web,
-        camera=args.camera,
-        grpc_port=args.grpc_port,
-        web_port=args.web_port,
-        memory_limit=args.memory_limit,
-        overwrite=args.overwrite,
-    )
+    sink = rerun_sink.Sink.from_args(args)
     if not args.file.exists():
         raise RecordingError(f"{args.file} does not exist: give the path of an .mcap recording")
     with rerun_sink.open_recording(sink) as rec:

@@ -174,15 +174,7 @@ class ViewerSettings:
 
 
 def main(args: argparse.Namespace) -> int:
-    sink = rerun_sink.Sink(
-        save=args.save,
-        web=args.web,
-        camera=args.camera,
-        grpc_port=args.grpc_port,
-        web_port=args.web_port,
-        memory_limit=args.memory_limit,
-        overwrite=args.overwrite,
-    )
+    sink = rerun_sink.Sink.from_args(args)
     s = ViewerSettings(
         viewer=args.viewer,
         camera=args.camera,

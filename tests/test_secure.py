@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import socket
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -12,7 +10,14 @@ import pytest
 
 from onebox import bus
 from onebox.errors import BusError
-from onebox.testing.processes import Inbox, Processes, free_port, has_key, wait_for_output
+from onebox.testing.processes import (
+    Inbox,
+    Processes,
+    free_port,
+    has_key,
+    wait_for_listening,
+    wait_for_output,
+)
 from schemas import Clock, Detection3DArray, GroundTruth, Image, codec
 from services import certs
 
@@ -35,15 +40,7 @@ def secure_router(cert_dir: Path) -> Iterator[str]:
     proc = procs.start(
         "router", "--secure", str(cert_dir), "--listen", f"tls/127.0.0.1:{port}", connect=False
     )
-    deadline = time.monotonic() + 15
-    while True:
-        try:
-            with socket.create_connection(("127.0.0.1", port), timeout=0.2):
-                break
-        except OSError:
-            if proc.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError(f"router did not start: {procs.stop(proc)}") from None
-            time.sleep(0.05)
+    wait_for_listening(procs, proc, port)
     yield procs.endpoint
     procs.stop_all()
 

@@ -79,6 +79,22 @@ class Processes:
             self.stop(proc)
 
 
+def wait_for_listening(
+    procs: Processes, proc: subprocess.Popen[str], port: int, timeout_s: float = 15.0
+) -> None:
+    """Wait until ``proc`` (a router) listens on the loopback ``port``; raise with its output
+    if it ends or takes longer than ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=0.2):
+                return
+        except OSError:
+            if proc.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"router did not start: {procs.stop(proc)}") from None
+            time.sleep(0.05)  # polling a port that has no event to wait on
+
+
 @contextlib.contextmanager
 def private_router() -> Iterator[str]:
     """Start ``onebox router`` on a free loopback port, yield its endpoint, stop it."""
@@ -86,15 +102,7 @@ def private_router() -> Iterator[str]:
     endpoint = f"tcp/127.0.0.1:{port}"
     procs = Processes(endpoint)
     proc = procs.start("router", "--listen", endpoint, connect=False)
-    deadline = time.monotonic() + 15
-    while True:
-        try:
-            with socket.create_connection(("127.0.0.1", port), timeout=0.2):
-                break
-        except OSError:
-            if proc.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError(f"router did not start: {procs.stop(proc)}") from None
-            time.sleep(0.05)
+    wait_for_listening(procs, proc, port)
     try:
         yield endpoint
     finally:
