@@ -397,29 +397,52 @@ def _plateaus(
     return plateaus, height, labels_top
 
 
-def _levels(
-    values: Float32Array, which: npt.NDArray[np.int32], count: int, tol: Float64Array
-) -> Float64Array:
-    """Per piece, its top's height: the most common height (the most readings within the
-    tolerance), then the mean of the readings within the tolerance of it, twice."""
+@dataclass(frozen=True)
+class _Windows:
+    """Per group a histogram of heights, in bins of a third of the least tolerance, summed over
+    a window of +-tol (the group's) around each bin."""
+
+    counts: Float64Array
+    """(groups, bins): readings within each bin's window."""
+    at: npt.NDArray[np.intp]
+    """Each reading's bin."""
+    reach: npt.NDArray[np.intp]
+    """(groups, 1): a window's half-width in bins."""
+    bin_m: float
+
+
+def _windows(
+    values: npt.NDArray[np.floating],
+    group: npt.NDArray[np.int32],
+    count: int,
+    tol: Float64Array,
+    low: float,
+) -> _Windows:
     bin_m = max(float(tol.min()) / 3.0, 1e-4)
-    low = float(values.min())
     bins = int((float(values.max()) - low) / bin_m) + 2
     if bins * count > 4_000_000:
         bin_m *= bins * count / 4_000_000
         bins = int((float(values.max()) - low) / bin_m) + 2
     at = ((values - low) / bin_m).astype(np.intp)
-    hist = np.bincount(which * bins + at, minlength=count * bins).reshape(count, bins)
+    hist = np.bincount(group * bins + at, minlength=count * bins).reshape(count, bins)
     cumulative = np.zeros((count, bins + 1))
     np.cumsum(hist, axis=1, out=cumulative[:, 1:])
     reach = np.ceil(tol / bin_m).astype(np.intp)[:, np.newaxis]
     columns = np.arange(bins)[np.newaxis, :]
-    upper = np.minimum(columns + reach + 1, bins)
-    lower = np.maximum(columns - reach, 0)
-    window = np.take_along_axis(cumulative, upper, 1) - np.take_along_axis(cumulative, lower, 1)
+    counts = np.take_along_axis(cumulative, np.minimum(columns + reach + 1, bins), 1)
+    counts -= np.take_along_axis(cumulative, np.maximum(columns - reach, 0), 1)
+    return _Windows(counts, at, reach, bin_m)
+
+
+def _levels(
+    values: Float32Array, which: npt.NDArray[np.int32], count: int, tol: Float64Array
+) -> Float64Array:
+    """Per piece, its top's height: the most common height (the most readings within the
+    tolerance), then the mean of the readings within the tolerance of it, twice."""
+    w = _windows(values, which, count, tol, float(values.min()))
     # The mean of the readings in the fullest window, then within the tolerance of it.
-    peak = window.argmax(axis=1)
-    near = np.abs(at - peak[which]) <= reach[which, 0]
+    peak = w.counts.argmax(axis=1)
+    near = np.abs(w.at - peak[which]) <= w.reach[which, 0]
     total = np.bincount(which[near], weights=values[near], minlength=count)
     level = total / np.maximum(np.bincount(which[near], minlength=count), 1)
     for _ in range(2):
@@ -850,19 +873,10 @@ def _ledges(
         return result
     # Per top a histogram in bins of a third of the tolerance; a window of +-tol around each
     # bin; the highest window holding enough readings is the ledge.
-    bin_m = max(float(tol.min()) / 3.0, 1e-4)
-    bins = int((float(values.max()) - lowest) / bin_m) + 2
-    if bins * count > 4_000_000:
-        bin_m *= bins * count / 4_000_000
-        bins = int((float(values.max()) - lowest) / bin_m) + 2
-    at = ((values - lowest) / bin_m).astype(np.intp)
-    hist = np.bincount(group * bins + at, minlength=count * bins).reshape(count, bins)
-    cumulative = np.zeros((count, bins + 1))
-    np.cumsum(hist, axis=1, out=cumulative[:, 1:])
-    half = np.ceil(tol / bin_m).astype(np.intp)[:, np.newaxis]
+    w = _windows(values, group, count, tol, lowest)
+    window, half, bin_m = w.counts, w.reach, w.bin_m
+    bins = window.shape[1]
     columns = np.arange(bins)[np.newaxis, :]
-    window = np.take_along_axis(cumulative, np.minimum(columns + half + 1, bins), 1)
-    window -= np.take_along_axis(cumulative, np.maximum(columns - half, 0), 1)
     total = np.bincount(group, minlength=count)[:, np.newaxis]
     enough = window >= np.maximum(8, 0.05 * total)
     has = enough.any(axis=1)
