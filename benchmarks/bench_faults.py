@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
 import subprocess
 import sys
 import tempfile
@@ -28,7 +27,7 @@ sys.path.insert(0, str(ROOT))
 
 from onebox import bus  # noqa: E402
 from onebox.memory import rss_mb  # noqa: E402
-from onebox.testing.processes import bus_args, private_router  # noqa: E402
+from onebox.testing.processes import bus_args, private_router, terminate  # noqa: E402
 from onebox.testing.synthetic import (  # noqa: E402
     Scene,
     camera_info,
@@ -48,16 +47,6 @@ def start(args: list[str], log_path: Path, **env: str) -> subprocess.Popen[bytes
             stderr=subprocess.STDOUT,
             env={**os.environ, "PYTHONUNBUFFERED": "1", **env},
         )
-
-
-def stop(proc: subprocess.Popen[bytes]) -> None:
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGTERM)
-    try:
-        proc.wait(timeout=30)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
 
 
 def main() -> int:
@@ -119,7 +108,7 @@ def main() -> int:
             idle = {name: rss_mb(p.pid) for name, p in procs.items()}
         finally:
             for proc in procs.values():
-                stop(proc)
+                terminate(proc, timeout_s=30)
         print()
         for name in procs:
             print(

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
 import subprocess
 import sys
 import tempfile
@@ -32,7 +31,7 @@ sys.path.insert(0, str(ROOT))
 
 from onebox import bus  # noqa: E402
 from onebox.recording import RecordingWriter, iter_messages  # noqa: E402
-from onebox.testing.processes import bus_args, free_port  # noqa: E402
+from onebox.testing.processes import bus_args, free_port, terminate  # noqa: E402
 from schemas import Header, Image, Message, codec  # noqa: E402
 
 CAMERA_KEYS = ("camera/image_raw", "camera/depth/image_raw")
@@ -51,16 +50,6 @@ def start(args: list[str], log_path: Path) -> subprocess.Popen[bytes]:
         )
     finally:
         log.close()
-
-
-def stop(proc: subprocess.Popen[bytes]) -> None:
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGTERM)
-    try:
-        proc.wait(timeout=60)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
 
 
 def wait_port(port: int, timeout_s: float = 15.0) -> None:
@@ -105,10 +94,10 @@ def beside_sim(workdir: Path, seconds: float, rate_hz: float, fast: bool, compre
         procs.append(sim)
         sim.wait(timeout=seconds * 10 + 60)
         time.sleep(1.0)  # the last captures' way through Zenoh and the recorder's queue
-        stop(recorder)
+        terminate(recorder, timeout_s=60)
     finally:
         for proc in reversed(procs):
-            stop(proc)
+            terminate(proc, timeout_s=60)
 
     stamps: dict[str, set[int]] = {k: set() for k in CAMERA_KEYS}
     first_ns = last_ns = 0
