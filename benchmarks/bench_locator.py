@@ -38,6 +38,7 @@ from onebox.testing.raycast import (
     Sphere,
     add_noise,
     box_on,
+    loaded_pallet,
     render,
 )
 
@@ -133,18 +134,8 @@ def accuracy() -> None:
     rng = np.random.default_rng(1)
     # Pallet: camera 2 m up, 10 degrees, 640x480 fx ~600, a pallet 0.15 m high with twelve
     # touching cartons of two sizes at three heights, a tall machine at one edge.
-    pallet = box_on(Plane(), 0.0, 0.0, (1.2, 1.0, 0.15), 0.0, (120, 90, 60))
-    cartons = []
-    for row in range(3):
-        for col in range(4):
-            wide = row == 1
-            size = (0.28, 0.3 if wide else 0.25, (0.2, 0.3, 0.25)[(row + col) % 3])
-            y = (row - 1) * 0.3
-            x = (col - 1.5) * 0.285
-            colour = tuple(int(v) for v in rng.integers(120, 220, 3))
-            cartons.append(box_on(pallet, x, y, size, 0.0, colour))
+    pallet, cartons, camera = loaded_pallet(rng)
     machine = box_on(Plane(), 1.2, 0.0, (0.4, 0.4, 1.2), 0.0, (80, 80, 90))
-    camera = Camera.tilted(2.0, 10.0, width=640, height=480, hfov_deg=56.0)
     depth, colour = render(Scene(camera, Plane(), (pallet, *cartons, machine)))
     for noise_name, noise in (("D435", Noise.d435()), ("Kinect", Noise.kinect())):
         noisy = add_noise(depth, noise, rng)

@@ -19,6 +19,7 @@ from onebox.testing.raycast import (
     Sphere,
     add_noise,
     box_on,
+    loaded_pallet,
     render,
 )
 
@@ -255,16 +256,7 @@ def test_pallet_cartons_measured_from_the_pallet():
     """Cartons of three heights on a pallet, D435 noise: each carton's own height and centre,
     the pallet's visible strip never a box."""
     rng = np.random.default_rng(1)
-    pallet = box_on(Plane(), 0.0, 0.0, (1.2, 1.0, 0.15), 0.0, (120, 90, 60))
-    cartons = []
-    for row in range(3):
-        for col in range(4):
-            size = (0.28, 0.3 if row == 1 else 0.25, (0.2, 0.3, 0.25)[(row + col) % 3])
-            colour = tuple(int(v) for v in rng.integers(120, 220, 3))
-            cartons.append(
-                box_on(pallet, (col - 1.5) * 0.285, (row - 1) * 0.3, size, 0.0, colour)  # type: ignore[arg-type]
-            )
-    camera = Camera.tilted(2.0, 10.0, width=640, height=480, hfov_deg=56.0)
+    pallet, cartons, camera = loaded_pallet(rng)
     depth, colour = render(Scene(camera, Plane(), (pallet, *cartons)))
     noisy = add_noise(depth, Noise.d435(), rng)
     found = find_boxes(noisy, camera.lens, camera.camera_to_world, colour)
@@ -282,16 +274,7 @@ def test_pallet_carton_not_measured_from_its_own_side_face(seed):
     slant in the gap before it (between the lower carton's top and its own) is no level it
     stands on; every carton's height is its own."""
     rng = np.random.default_rng(1)
-    pallet = box_on(Plane(), 0.0, 0.0, (1.2, 1.0, 0.15), 0.0, (120, 90, 60))
-    cartons = []
-    for row in range(3):
-        for col in range(4):
-            size = (0.28, 0.3 if row == 1 else 0.25, (0.2, 0.3, 0.25)[(row + col) % 3])
-            colour = tuple(int(v) for v in rng.integers(120, 220, 3))
-            cartons.append(
-                box_on(pallet, (col - 1.5) * 0.285, (row - 1) * 0.3, size, 0.0, colour)  # type: ignore[arg-type]
-            )
-    camera = Camera.tilted(2.0, 10.0, width=640, height=480, hfov_deg=56.0)
+    pallet, cartons, camera = loaded_pallet(rng)
     depth, colour = render(Scene(camera, Plane(), (pallet, *cartons)))
     noisy = add_noise(depth, Noise.kinect(), np.random.default_rng(seed))
     found = find_boxes(noisy, camera.lens, camera.camera_to_world, colour)

@@ -457,3 +457,20 @@ def add_noise(depth_m: Float32Array, noise: Noise, rng: np.random.Generator) -> 
         out = np.round(out / noise.quantum_m) * noise.quantum_m
     result: Float32Array = out.astype(np.float32)
     return result
+
+
+def loaded_pallet(rng: np.random.Generator) -> tuple[Box, list[Box], Camera]:
+    """A pallet 0.15 m tall with twelve touching cartons in three rows of three heights (the
+    middle row wider), and the camera 2 m up tilted 10 degrees, 640 x 480 (fx ~600), that the
+    pallet benchmark and tests look through. ``rng`` gives the cartons' colours."""
+    pallet = box_on(Plane(), 0.0, 0.0, (1.2, 1.0, 0.15), 0.0, (120, 90, 60))
+    cartons = []
+    for row in range(3):
+        for col in range(4):
+            size = (0.28, 0.3 if row == 1 else 0.25, (0.2, 0.3, 0.25)[(row + col) % 3])
+            red, green, blue = (int(v) for v in rng.integers(120, 220, 3))
+            cartons.append(
+                box_on(pallet, (col - 1.5) * 0.285, (row - 1) * 0.3, size, 0.0, (red, green, blue))
+            )
+    camera = Camera.tilted(2.0, 10.0, width=640, height=480, hfov_deg=56.0)
+    return pallet, cartons, camera
