@@ -303,7 +303,13 @@ def test_record_keeps_every_sample_and_writes_a_file_that_reads_back(started, te
     assert "Traceback" not in text
     recorded = [(r.key, r.payload) for r in iter_messages(out)]
     assert all((key, payload) in recorded for key, payload in valid.items())
-    assert len(recorded) >= len(samples) * 0.9, "a recorder drops only when the disk is behind"
+    assert "dropped" not in text, "a recorder drops only when the disk is behind"
+    assert f" {len(recorded)} messages," in text, "the file holds what the recorder says it wrote"
+    # Depth pictures from a blocking publisher and tf_static are reliable end to end: every one
+    # must be in the file. The router drops camera info rather than wait on a full queue
+    # (config/router.json5), so the burst after 2 MB pictures may lose some of it on the way.
+    missing = [(key, what) for key, what, payload in samples if (key, payload) not in recorded]
+    assert not [m for m in missing if m[0] != INFO], missing
 
 
 def test_check_survives_everything_and_reports_the_valid_capture(processes, test_bus):
