@@ -311,6 +311,34 @@ def test_box_nearly_covering_the_box_under_it(distance_m, tilt_deg):
     assert math.dist(top.centre, upper.centre) <= 0.0025 * distance_m
 
 
+@pytest.mark.parametrize(("distance_m", "tilt_deg"), [(0.8, 25.0), (1.5, 10.0)])
+def test_box_overhanging_the_box_under_it_measured_from_its_faces(distance_m, tilt_deg):
+    """A box across a narrower one, overhanging its long sides (the lower top's rims lie
+    past the upper's ends, out of the probes' reach): its faces end at the lower top, so it
+    is measured from there, not from the table."""
+    lower = box_on(Plane(), 0.05, 0.03, (0.15, 0.06, 0.11), 30.0, colour=(40, 90, 200))
+    upper = box_on(lower, 0.02, 0.0, (0.07, 0.09, 0.12), 15.0, colour=(190, 150, 100))
+    camera = Camera.tilted(distance_m, tilt_deg, width=640, height=480)
+    depth, colour = render(Scene(camera, Plane(), (lower, upper)))
+    top = find_boxes(depth, camera.lens, camera.camera_to_world, colour).boxes[0]
+    assert top.size[2] == pytest.approx(0.12, abs=0.001)
+    assert math.dist(top.centre, upper.centre) <= 0.0025 * distance_m
+
+
+@pytest.mark.parametrize(("distance_m", "tilt_deg"), [(0.8, 25.0), (1.5, 10.0)])
+def test_box_over_a_box_it_hides_measured_from_its_faces(distance_m, tilt_deg):
+    """A box on a smaller one it hides whole: no level under it is seen, but its side faces
+    end at its bottom, 9 cm up; the height is good to the faces' pixels (under 6 mm here),
+    not the 16 cm from the table."""
+    lower = box_on(Plane(), 0.05, 0.03, (0.08, 0.06, 0.09), 30.0, colour=(40, 90, 200))
+    upper = box_on(lower, 0.0, 0.0, (0.14, 0.10, 0.07), 10.0, colour=(190, 150, 100))
+    camera = Camera.tilted(distance_m, tilt_deg, width=640, height=480)
+    depth, colour = render(Scene(camera, Plane(), (lower, upper)))
+    found = find_boxes(depth, camera.lens, camera.camera_to_world, colour)
+    assert len(found.boxes) == 1
+    assert found.boxes[0].size[2] == pytest.approx(0.07, abs=0.006)
+
+
 TAN = ((200, 150, 90), (140, 100, 60))
 """Two carton colours, alternating so touching cartons part by colour."""
 

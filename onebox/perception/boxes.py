@@ -64,7 +64,7 @@ import numpy.typing as npt
 from scipy import ndimage
 
 from onebox.geometry import Intrinsics
-from onebox.perception import segment
+from onebox.perception import faces, segment
 from onebox.perception.rectangle import Rectangle, fit_rectangles
 from onebox.perception.support import SIGMA_FLOOR_M, Support, fit_support, support_holds
 
@@ -252,6 +252,7 @@ def find_boxes(
     basis = _plane_basis(support, camera_to_world)
     boxes = [p for p in plateaus if p.is_box]
     _bases(boxes, plateaus, height_m, labels_top, lens, support, settings)
+    _raise_to_faces(boxes, plateaus, depth, lens, support, settings)
     _shadowed_sides(boxes, support.offset_camera_m, settings)
     reported = [b for b in boxes if not b.platform and not _extent_unknown(b)]
     return Found(support, _report(reported, support, basis, camera_to_world, settings), frame)
@@ -1343,6 +1344,54 @@ def _bases(
             box.on_plateau = level.label
 
 
+def _raise_to_faces(
+    boxes: list[_Plateau],
+    plateaus: list[_Plateau],
+    depth: Float32Array,
+    lens: Intrinsics,
+    support: Support,
+    settings: FinderSettings,
+) -> None:
+    """A box whose side faces end well above its base stands higher (a box standing on a
+    narrower one, which it overhangs, with the lower top's rim out of the probes' reach or
+    unseen): its base is the level at the faces' bottom (the support, a top or a box's ledge),
+    or that bottom itself when no level is near it (a box on one hidden under it)."""
+    if not boxes:
+        return
+    rects = [b.rect for b in boxes]
+    assert all(r is not None for r in rects)
+    tolerance = np.array([max(3.0 * b.footprint_m, FACE_TOLERANCE_M, b.tolerance_m) for b in boxes])
+    bottoms = faces.face_bottoms(
+        np.array([r.middle for r in rects]),  # type: ignore[union-attr]
+        np.array([r.axis for r in rects]),  # type: ignore[union-attr]
+        np.array([[r.length_m / 2, r.width_m / 2] for r in rects]),  # type: ignore[union-attr]
+        np.array([b.height_m for b in boxes]),
+        tolerance,
+        depth,
+        lens,
+        _plane_basis(support, None),
+        support.offset_camera_m,
+    )
+    levels = [(0.0, None), *((p.height_m, p) for p in plateaus)]
+    levels += [(b.ledge_m, None) for b in boxes if b.ledge_m is not None]
+    for box, bottom, tol in zip(boxes, bottoms, tolerance, strict=True):
+        if bottom is None:
+            continue
+        reach = max(settings.min_height_m, faces.resolution_m(box.height_m) * 2.0 + tol)
+        if bottom <= box.base_m + reach or bottom >= box.height_m - settings.min_height_m:
+            continue
+        near = [(abs(h - bottom), h, p) for h, p in levels if abs(h - bottom) <= reach]
+        if near:
+            _, box.base_m, level = min(near, key=lambda n: n[0])
+            box.on_plateau = level.label if level is not None and level.is_box else None
+        else:
+            box.base_m, box.on_plateau = bottom, None
+
+
+FACE_TOLERANCE_M = 0.004
+"""How far across a side face's plane a reading may lie and still be on it, at least."""
+
+
 OWN_FACE_SHARE = 1.0 / 3.0
 """A piece below a box with more than this share of its readings inside the box's rectangle is
 the box's own side face: nothing under a box's top can be seen."""
@@ -1507,8 +1556,6 @@ def _report(
         )
     if len(result) != len(ordered):
         # The workspace dropped some: "on" must index the list as reported.
-        kept = {id(r) for r in result}
-        del kept
         result = [replace(r, on=None) for r in result]
     return result
 
