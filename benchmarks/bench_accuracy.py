@@ -67,6 +67,9 @@ class Errors:
     false: int = 0
     pictures: int = 0
     hidden_found: int = 0
+    hidden_height_mm: list[float] = field(default_factory=list)
+    """Heights of boxes partly hidden under another box: their top is seen in part, but how
+    high it stands is as measurable as any top's."""
     ms: list[float] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
 
@@ -151,10 +154,18 @@ def score(
             )
             continue
         used.add(nearest)
+        true = boxes[nearest]
         if nearest in unjudged:
             errors.hidden_found += 1  # its whole top is not to be seen: neither right nor wrong
+            if carried[nearest] < 2:  # ... but its height is (not a platform's, under many)
+                height_error = abs(box.size[2] - true.size.z)
+                errors.hidden_height_mm.append(1000 * height_error)
+                if height_error > 0.01:
+                    errors.notes.append(
+                        f"box {nearest} (partly hidden) height {box.size[2]:.3f}, true "
+                        f"{true.size.z:.3f}"
+                    )
             continue
-        true = boxes[nearest]
         errors.found += 1
         distance_m = float(np.linalg.norm(top - camera))
         p = true.pose.position
@@ -220,8 +231,9 @@ def report(title: str, errors: Errors, verbose: bool) -> None:
     print(row("length/width, mm", errors.size_mm))
     print(row("length/width at 0.4 m", errors.size_mm_at_04))
     print(row("height, mm", errors.height_mm))
+    print(row("height, partly hidden", errors.hidden_height_mm))
     if verbose:
-        for note in errors.notes[:20]:
+        for note in errors.notes[:30]:
             print(f"    {note}")
     sys.stdout.flush()
 
