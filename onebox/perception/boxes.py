@@ -1354,13 +1354,16 @@ def _raise_to_faces(
 ) -> None:
     """A box whose side faces end well above its base stands higher (a box standing on a
     narrower one, which it overhangs, with the lower top's rim out of the probes' reach or
-    unseen): its base is the level at the faces' bottom (the support, a top or a box's ledge),
-    or that bottom itself when no level is near it (a box on one hidden under it)."""
+    unseen): its base is the level (the support, a top or a box's ledge) between where its
+    faces are last seen and where the camera sees past them, or the faces' bottom itself when
+    no level is there (a box on one hidden under it)."""
     if not boxes:
         return
     rects = [b.rect for b in boxes]
     assert all(r is not None for r in rects)
-    tolerance = np.array([max(3.0 * b.footprint_m, FACE_TOLERANCE_M, b.tolerance_m) for b in boxes])
+    tolerance = np.array(
+        [max(FACE_FOOTPRINTS * b.footprint_m, FACE_TOLERANCE_M, b.tolerance_m) for b in boxes]
+    )
     bottoms = faces.face_bottoms(
         np.array([r.middle for r in rects]),  # type: ignore[union-attr]
         np.array([r.axis for r in rects]),  # type: ignore[union-attr]
@@ -1377,19 +1380,31 @@ def _raise_to_faces(
     for box, bottom, tol in zip(boxes, bottoms, tolerance, strict=True):
         if bottom is None:
             continue
-        reach = max(settings.min_height_m, faces.resolution_m(box.height_m) * 2.0 + tol)
-        if bottom <= box.base_m + reach or bottom >= box.height_m - settings.min_height_m:
+        slack = faces.resolution_m(box.height_m) + tol
+        if (
+            bottom.middle_m <= box.base_m + max(settings.min_height_m, 2.0 * slack)
+            or bottom.middle_m >= box.height_m - settings.min_height_m
+        ):
             continue
-        near = [(abs(h - bottom), h, p) for h, p in levels if abs(h - bottom) <= reach]
+        # A level between where the face is last seen and where the camera sees past it,
+        # the nearest the face's last point (the rim of a box underneath hides the rest).
+        near = [
+            (bottom.high_m - h, h, p)
+            for h, p in levels
+            if bottom.low_m - slack <= h <= bottom.high_m + slack
+        ]
         if near:
-            _, box.base_m, level = min(near, key=lambda n: n[0])
+            _, box.base_m, level = min(near, key=lambda n: abs(n[0]))
             box.on_plateau = level.label if level is not None and level.is_box else None
         else:
-            box.base_m, box.on_plateau = bottom, None
+            box.base_m, box.on_plateau = bottom.middle_m, None
 
 
-FACE_TOLERANCE_M = 0.004
-"""How far across a side face's plane a reading may lie and still be on it, at least."""
+FACE_TOLERANCE_M = 0.003
+FACE_FOOTPRINTS = 1.5
+"""How far across a side face's plane a reading may lie and still be on it: this many pixel
+footprints (the rectangle's sides are good to about one), the top's height tolerance (the
+noise), and at least FACE_TOLERANCE_M."""
 
 
 OWN_FACE_SHARE = 1.0 / 3.0

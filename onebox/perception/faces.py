@@ -3,8 +3,8 @@
 Contract: :func:`face_bottoms` takes each box's top (its rectangle in the support plane and
 its height), the depth picture (H x W metres; NaN, 0 and below are no reading), the lens,
 the plane's basis in the optical frame (rows e1, e2, n) and the camera's height above the
-plane, and returns for each box the height above the plane at which its side faces end, or
-None where the picture cannot say. No I/O.
+plane, and returns for each box a :class:`Bottom` (the heights between which its side faces
+end) or None where the picture cannot say. No I/O.
 
 A box's top says nothing of what it stands on; its sides do. A box standing on the surface
 shows a face from its top down to the surface on every side that faces the camera. A box
@@ -12,16 +12,19 @@ standing on a narrower box overhangs it: below the box's bottom the camera looks
 face's plane, under the box. Along lines down each face that the camera sees, each point of
 the face is looked up in the picture and the surface seen there sorted by where it lies
 across the face's plane: on it (the face is there), beyond it (the face has ended: the camera
-sees under the box) or before it (something in front hides the face: no answer). A line's
-bottom is where, going down, the first two points beyond come after at least two on the face.
-A box is solid down to its bottom, so its bottom is the highest one that two lines agree on,
-on any side: where a side runs flush with the box under it, the face goes on down, seen as
-one, and says nothing. None when no two lines see the face end above the surface.
+sees under the box) or before it (something in front hides the face, such as the rim of the
+box underneath: no answer). Going down a line, past the points that give no answer, the face
+ends where points mostly beyond it first follow points mostly on it: between the last point
+on it and the first beyond. A box is solid down to its bottom, so its bottom is the highest
+one that two lines agree on, on any side: where a side runs flush with the box under it, the
+face goes on down, seen as one, and says nothing. None when no two lines see the face end
+above the surface.
 """
 
 from __future__ import annotations
 
 import itertools
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
@@ -29,13 +32,27 @@ import numpy.typing as npt
 from onebox.geometry import Intrinsics
 
 Float64Array = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
 
 LINES = np.linspace(-0.35, 0.35, 5)
 """Where the lines run down each side, as shares of the side's length from its middle."""
 SAMPLES = 48
 """Points down each line, from just under the top to the surface."""
+RUN = 4
+RUN_OF = 3
+"""A face ends where RUN_OF of RUN points in a row are on it, and of the next RUN beyond it."""
 MIN_FACE_PX = 6.0
 """A face that spans fewer pixels from top to bottom than this (seen edge-on) says nothing."""
+
+
+@dataclass(frozen=True)
+class Bottom:
+    """Where a box's faces end: at most ``high_m`` (a face is seen there), at least ``low_m``
+    (the camera sees past the face there); ``middle_m`` is the best single figure."""
+
+    low_m: float
+    high_m: float
+    middle_m: float
 
 
 def face_bottoms(
@@ -48,7 +65,7 @@ def face_bottoms(
     lens: Intrinsics,
     basis: Float64Array,
     camera_height_m: float,
-) -> list[float | None]:
+) -> list[Bottom | None]:
     """Each box's bottom as its faces show it (see the module docstring).
 
     ``middles`` (N x 2), ``axes`` (N x 2, unit, the length's) and ``halves`` (N x 2: half the
@@ -59,7 +76,6 @@ def face_bottoms(
     n_boxes = len(tops_m)
     if n_boxes == 0:
         return []
-    rows_n, cols_n = depth_m.shape
     ax = axes
     perp = np.stack([-ax[:, 1], ax[:, 0]], axis=1)
     # Sides: outward normal, direction along the side, half extent out and along.
@@ -71,55 +87,37 @@ def face_bottoms(
     # The camera stands over the plane's origin: a side faces it when the origin lies out past
     # the side's line.
     facing = np.einsum("nsk,nsk->ns", -edge_mid, out) > 0.0
-    # Points on each face: N x 4 sides x lines x samples, in plane coordinates and height.
-    feet = (
-        edge_mid[:, :, np.newaxis, :]
-        + LINES[np.newaxis, np.newaxis, :, np.newaxis]
-        * (2 * half_along[..., np.newaxis, np.newaxis])
-        * along[:, :, np.newaxis, :]
-    )  # N x 4 x L x 2
     share = np.linspace(0.97, 0.0, SAMPLES)  # just under the top, down to the surface
     heights = tops_m[:, np.newaxis] * share[np.newaxis, :]  # N x S
-    e1, e2, normal = basis
-    xyz = (
-        feet[..., np.newaxis, 0:1] * e1
-        + feet[..., np.newaxis, 1:2] * e2
-        + (heights[:, np.newaxis, np.newaxis, :, np.newaxis] - camera_height_m) * normal
-    )  # N x 4 x L x S x 3
-    z = xyz[..., 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = lens.fx * xyz[..., 0] / z + lens.cx
-        v = lens.fy * xyz[..., 1] / z + lens.cy
-    ui, vi = np.rint(u), np.rint(v)
-    inside = (z > 0) & (ui >= 0) & (ui < cols_n) & (vi >= 0) & (vi < rows_n)
-    # The face's extent in pixels, top to bottom, along each line.
-    span_px = np.hypot(u[..., 0] - u[..., -1], v[..., 0] - v[..., -1])
-    ui = np.where(inside, ui, 0).astype(np.intp)
-    vi = np.where(inside, vi, 0).astype(np.intp)
-    d = np.asarray(depth_m, dtype=np.float64)[vi, ui]
-    with np.errstate(invalid="ignore"):
-        seen = inside & np.isfinite(d) & (d > 0)
-    across_r, down_r = lens.rays(cols_n, rows_n)
-    seen_xyz = np.stack([across_r[ui] * d, down_r[vi] * d, d], axis=-1)
-    seen_a = seen_xyz @ e1
-    seen_b = seen_xyz @ e2
-    # How far out past the face's plane the surface seen at each point lies.
-    offset = (seen_a - edge_mid[:, :, np.newaxis, np.newaxis, 0]) * out[
-        :, :, np.newaxis, np.newaxis, 0
-    ] + (seen_b - edge_mid[:, :, np.newaxis, np.newaxis, 1]) * out[:, :, np.newaxis, np.newaxis, 1]
     tol = tolerances_m[:, np.newaxis, np.newaxis, np.newaxis]
+    reading = _Reading(depth_m, lens, basis, camera_height_m, heights, out, along, half_along)
+    offset, seen, span_px = reading(edge_mid)
+    # The rectangle's side may lie a little off the face (a footprint or so, which a face seen
+    # steeply turns into a centimetre of height): each face is moved to where its readings
+    # say it stands (their median offset), then read again.
+    with np.errstate(invalid="ignore"):
+        near = np.where(seen & (np.abs(offset) <= tol), offset, np.nan)
+    shift = np.zeros(facing.shape)
+    counts = np.sum(np.isfinite(near), axis=(2, 3))
+    enough = counts >= SAMPLES // 2
+    if enough.any():
+        shift[enough] = np.nanmedian(near[enough].reshape(int(enough.sum()), -1), axis=1)
+        offset, seen, span_px = reading(edge_mid + out * shift[..., np.newaxis])
     on = seen & (np.abs(offset) <= tol)
     beyond = seen & (offset < -tol)
-    step = np.array([resolution_m(float(t)) for t in tops_m])
-    result: list[float | None] = []
+    result: list[Bottom | None] = []
     for i in range(n_boxes):
-        ends: list[tuple[float, float]] = []
+        ends: list[tuple[float, float, float]] = []
         for k in np.flatnonzero(facing[i]):
             for line in np.flatnonzero(span_px[i, k] >= MIN_FACE_PX):
-                bottom = _line_bottom(on[i, k, line], beyond[i, k, line], heights[i])
-                if bottom is not None:
-                    ends.append((bottom, float(span_px[i, k, line])))
-        result.append(_agreed(ends, 2.0 * step[i] + float(tolerances_m[i])))
+                end = _line_end(on[i, k, line], beyond[i, k, line], heights[i])
+                if end is not None:
+                    # Each point is read at the pixel it falls in, whose ray meets the face
+                    # up to half a pixel's height away.
+                    px = float(span_px[i, k, line])
+                    half_px = 0.5 * heights[i, 0] / px
+                    ends.append((end[0] - half_px, end[1] + half_px, px))
+        result.append(_agreed(ends, float(tolerances_m[i])))
     return result
 
 
@@ -128,29 +126,106 @@ def resolution_m(top_m: float) -> float:
     return top_m * 0.97 / (SAMPLES - 1)
 
 
-def _agreed(ends: list[tuple[float, float]], within_m: float) -> float | None:
-    """The highest bottom two lines agree on (None when no two do): the lines within
-    ``within_m`` of that pair, weighted by how many pixels their face spans (a face seen at a
-    slant puts more of its height in each pixel)."""
-    ends = sorted(ends, reverse=True)
-    for (first, _), (second, _) in itertools.pairwise(ends):
-        if first - second <= within_m:
-            middle = 0.5 * (first + second)
-            near = np.array([(e, px) for e, px in ends if abs(e - middle) <= within_m])
-            weights = near[:, 1] ** 2
-            return float(near[:, 0] @ weights / weights.sum())
+def _agreed(ends: list[tuple[float, float, float]], slack_m: float) -> Bottom | None:
+    """The highest end two lines agree on (their spans overlap, within ``slack_m``), None
+    when no two do. The lines that overlap that pair's give the span; the middle is their
+    middles' mean weighted by how many pixels their face spans (a face seen at a slant puts
+    more of its height in each pixel)."""
+    ends = sorted(ends, key=lambda e: -e[1])
+    for a, b in itertools.combinations(ends, 2):
+        if max(a[0], b[0]) > min(a[1], b[1]) + slack_m:
+            continue
+        low, high = max(a[0], b[0]), min(a[1], b[1])
+        near = np.array([e for e in ends if e[0] <= high + slack_m and e[1] >= low - slack_m])
+        weights = near[:, 2] ** 2
+        middle = float((0.5 * (near[:, 0] + near[:, 1])) @ weights / weights.sum())
+        low, high = float(near[:, 0].max()), float(near[:, 1].min())
+        if low > high:
+            low = high = middle
+        return Bottom(low, high, min(max(middle, low), high))
     return None
 
 
-def _line_bottom(
+def _line_end(
     on: npt.NDArray[np.bool_], beyond: npt.NDArray[np.bool_], heights: Float64Array
-) -> float | None:
-    """Going down one line: the height between the last point on the face and the first of
-    two beyond it, after two on it; None when the face does not end so (or is not seen)."""
-    pair = beyond[:-1] & beyond[1:]
-    starts = np.flatnonzero(pair & (np.cumsum(on)[:-1] >= 2))
-    if not len(starts):
+) -> tuple[float, float] | None:
+    """Going down one line, past the points that say nothing: the heights of the last point
+    on the face and the first beyond it where RUN_OF of RUN points on it are followed by
+    RUN_OF of RUN beyond it (a noisy reading is outvoted); None when the face does not end
+    so. Points that flip between on and beyond are a face seen nearly edge-on, not its end."""
+    said = np.flatnonzero(on | beyond)
+    if len(said) < 2 * RUN:
         return None
-    k = int(starts[0])
-    last_on = np.flatnonzero(on[:k])
-    return float(0.5 * (heights[last_on[-1]] + heights[k]))
+    is_on, is_beyond = on[said], beyond[said]
+    kernel = np.ones(RUN)
+    on_n = np.convolve(is_on, kernel, "valid")  # on_n[j]: on among said[j .. j + RUN - 1]
+    beyond_n = np.convolve(is_beyond, kernel, "valid")
+    ends = np.flatnonzero((beyond_n[RUN:] >= RUN_OF) & (on_n[:-RUN] >= RUN_OF)) + RUN
+    ends = ends[is_beyond[ends]]
+    if not len(ends):
+        return None
+    k = int(ends[0])
+    last_on = np.flatnonzero(is_on[:k])[-1]
+    return float(heights[said[k]]), float(heights[said[last_on]])
+
+
+class _Reading:
+    """Points down the lines of every face, looked up in the picture."""
+
+    def __init__(
+        self,
+        depth_m: npt.NDArray[np.floating],
+        lens: Intrinsics,
+        basis: Float64Array,
+        camera_height_m: float,
+        heights: Float64Array,
+        out: Float64Array,
+        along: Float64Array,
+        half_along: Float64Array,
+    ) -> None:
+        self.depth = np.asarray(depth_m, dtype=np.float64)
+        self.lens = lens
+        self.basis = basis
+        self.camera_height_m = camera_height_m
+        self.heights = heights
+        self.out = out
+        # Where each line runs along its side, from the side's middle: N x 4 x L x 2.
+        self.along = (
+            LINES[np.newaxis, np.newaxis, :, np.newaxis]
+            * (2 * half_along[..., np.newaxis, np.newaxis])
+            * along[:, :, np.newaxis, :]
+        )
+
+    def __call__(self, edge_mid: Float64Array) -> tuple[Float64Array, BoolArray, Float64Array]:
+        """For faces through ``edge_mid`` (N x 4 x 2): how far out past the face's plane the
+        surface seen at each point lies (N x 4 x L x S), whether it is seen, and each line's
+        extent in pixels, top to bottom (N x 4 x L)."""
+        rows_n, cols_n = self.depth.shape
+        lens = self.lens
+        e1, e2, normal = self.basis
+        feet = edge_mid[:, :, np.newaxis, :] + self.along  # N x 4 x L x 2
+        xyz = (
+            feet[..., np.newaxis, 0:1] * e1
+            + feet[..., np.newaxis, 1:2] * e2
+            + (self.heights[:, np.newaxis, np.newaxis, :, np.newaxis] - self.camera_height_m)
+            * normal
+        )  # N x 4 x L x S x 3
+        z = xyz[..., 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = lens.fx * xyz[..., 0] / z + lens.cx
+            v = lens.fy * xyz[..., 1] / z + lens.cy
+        ui, vi = np.rint(u), np.rint(v)
+        inside = (z > 0) & (ui >= 0) & (ui < cols_n) & (vi >= 0) & (vi < rows_n)
+        span_px = np.hypot(u[..., 0] - u[..., -1], v[..., 0] - v[..., -1])
+        ui = np.where(inside, ui, 0).astype(np.intp)
+        vi = np.where(inside, vi, 0).astype(np.intp)
+        d = self.depth[vi, ui]
+        with np.errstate(invalid="ignore"):
+            seen = inside & np.isfinite(d) & (d > 0)
+        across_r, down_r = lens.rays(cols_n, rows_n)
+        seen_xyz = np.stack([across_r[ui] * d, down_r[vi] * d, d], axis=-1)
+        a = seen_xyz @ e1 - edge_mid[:, :, np.newaxis, np.newaxis, 0]
+        b = seen_xyz @ e2 - edge_mid[:, :, np.newaxis, np.newaxis, 1]
+        out = self.out[:, :, np.newaxis, np.newaxis, :]
+        offset: Float64Array = a * out[..., 0] + b * out[..., 1]
+        return offset, seen, span_px
