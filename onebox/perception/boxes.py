@@ -1375,11 +1375,12 @@ def _raise_to_faces(
         _plane_basis(support, None),
         support.offset_camera_m,
     )
-    levels = [(0.0, None), *((p.height_m, p) for p in plateaus)]
-    levels += [(b.ledge_m, None) for b in boxes if b.ledge_m is not None]
+    tops: list[tuple[float, _Plateau | None]] = [(p.height_m, p) for p in plateaus]
     for box, bottom, tol in zip(boxes, bottoms, tolerance, strict=True):
         if bottom is None:
             continue
+        # The support, every top, and the box's own ledge.
+        levels = [(0.0, None), *tops, *([] if box.ledge_m is None else [(box.ledge_m, None)])]
         slack = faces.resolution_m(box.height_m) + tol
         if (
             bottom.middle_m <= box.base_m + max(settings.min_height_m, 2.0 * slack)
@@ -1387,15 +1388,26 @@ def _raise_to_faces(
         ):
             continue
         # A level between where the face is last seen and where the camera sees past it,
-        # the nearest the face's last point (the rim of a box underneath hides the rest).
+        # the nearest the face's last point (the rim of a box underneath hides the rest), of
+        # those that may reach under the box.
         near = [
             (bottom.high_m - h, h, p)
             for h, p in levels
             if bottom.low_m - slack <= h <= bottom.high_m + slack
+            and (p is None or _reaches_under(p, box) or _past_hidden_side(p, box))
         ]
         if near:
             _, box.base_m, level = min(near, key=lambda n: abs(n[0]))
             box.on_plateau = level.label if level is not None and level.is_box else None
+            for p in plateaus:
+                if (
+                    abs(p.height_m - box.base_m) <= max(p.tolerance_m, box.tolerance_m)
+                    and _past_hidden_side(p, box)
+                    and _touch(p, box)
+                ):
+                    # The box hides that top's side: the top goes on under it, how far is
+                    # unknown (a box with one standing on it, seen as a strip): a level.
+                    p.platform = True
         else:
             box.base_m, box.on_plateau = bottom.middle_m, None
 
@@ -1477,6 +1489,16 @@ def _is_platform(lower: _Plateau, upper: _Plateau) -> bool:
         and _reaches_under(lower, upper, slack=-0.0)
         and not (_inside(lower, upper))
     )
+
+
+def _past_hidden_side(lower: _Plateau, upper: _Plateau) -> bool:
+    """Whether the upper box's middle lies out past one of the lower top's hidden sides."""
+    if lower.rect is None or upper.rect is None:
+        return False
+    rect = lower.rect
+    rx = upper.rect.middle[0] - rect.middle[0]
+    ry = upper.rect.middle[1] - rect.middle[1]
+    return any(rx * o0 + ry * o1 > _half_extent(rect, o0, o1) for o0, o1 in rect.hidden_normals)
 
 
 def _inside(lower: _Plateau, upper: _Plateau) -> bool:
