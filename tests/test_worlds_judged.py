@@ -1,6 +1,7 @@
 """The box finder on MuJoCo renders of random scenes, judged against their ground truth: the
 scenes below hold stacked boxes whose base only their side faces show (a box across a
-narrower one, overhanging it) and a box turned across the box under it."""
+narrower one, overhanging it) and boxes that hide a side of the box under them, whose top is
+then seen as a strip."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from onebox.world.noise import PRESETS
 from onebox.world.random_scene import random_scene
 
 
-@pytest.mark.parametrize("seed", [1, 3, 4, 9, 15, 27])
+@pytest.mark.parametrize("seed", [1, 3, 4, 9, 15, 27, 47])
 def test_random_scene_every_box_right(seed):
     """Every box found, none false, each height (partly hidden ones too) within 2 mm."""
     scene = random_scene(seed, boxes=8, objects=3, width=640, height=480)

@@ -1478,16 +1478,17 @@ def _own_faces(
 
 def _is_platform(lower: _Plateau, upper: _Plateau) -> bool:
     """A box's base that is no box of its own: a top that goes on under the box past a hidden
-    side, or one mostly covered by what stands on it."""
+    side (the box hides it), or one mostly covered by what stands on it."""
     if not lower.is_box or lower.rect is None:
         return True
     rect = lower.rect
     if lower.visible_m2 < 0.5 * rect.length_m * rect.width_m:
         return True
-    return (
-        rect.hidden_sides > 0
-        and _reaches_under(lower, upper, slack=-0.0)
-        and not (_inside(lower, upper))
+    return rect.hidden_sides > 0 and (
+        (_reaches_under(lower, upper, slack=-0.0) and not _inside(lower, upper))
+        # The box on it hides one of its sides: the top goes on under the box, how far is
+        # unknown (seen as a strip beside the box).
+        or (_past_hidden_side(lower, upper) and _touch(lower, upper))
     )
 
 
