@@ -20,7 +20,9 @@ Where it shows them:
     are 9876 and 9090 when free and any free ports otherwise, so a second pipeline's viewer
     starts beside the first. The server keeps --memory-limit of data for late browsers and
     sends a late page the newest first; what never changes (lens, tf_static, table) and the
-    newest pose, support plane and true boxes are static and always kept. A live page gets the
+    newest pose, support plane and true boxes are static and always kept. The page's viewer
+    drops its oldest data once its memory passes --page-memory-limit (Rerun's own page keeps
+    everything up to 2.3 GiB), so its heap stops growing. A live page gets the
     pictures at most --picture-hz times a second, --picture-scale times smaller, and the
     boxes with every capture: a software-rendered browser takes data in only as fast as it
     draws, so every message costs;
@@ -90,6 +92,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "256KiB",
         "what the web server keeps (as compressed) for a page that joins late, sent newest "
         "first; static data is dropped last. Small, so a late page catches up in seconds",
+    )
+    settings.add(
+        parser,
+        "page_memory_limit",
+        "128MiB",
+        "the web page's viewer drops its oldest data once its memory (Rerun's own count) passes "
+        "this, e.g. 128MiB, 1GB, 10%%; the newest of each kind is always kept; empty: 2.3 GiB",
     )
     settings.add(
         parser,

@@ -113,7 +113,8 @@ def test_viewer_off_idles_until_stopped(processes):
 
 
 def test_viewer_serves_the_web_viewer_on_loopback(processes, test_bus):
-    """With no display it serves the web viewer on 127.0.0.1 and prints the address to open."""
+    """With no display it serves the web viewer on 127.0.0.1 and prints the address to open;
+    the page starts Rerun's viewer with the page memory limit, the rest is Rerun's own."""
     grpc_port, web_port = free_port(), free_port()
     proc = processes.start(
         "viewer",
@@ -121,18 +122,40 @@ def test_viewer_serves_the_web_viewer_on_loopback(processes, test_bus):
         str(grpc_port),
         "--web-port",
         str(web_port),
-        env={"DISPLAY": "", "WAYLAND_DISPLAY": ""},
+        env={"DISPLAY": "", "WAYLAND_DISPLAY": "", "ONEBOX_PAGE_MEMORY_LIMIT": "96MiB"},
     )
     printed = wait_for_output(proc, "/proxy", timeout_s=40)
     address = f"http://127.0.0.1:{web_port}/?url=rerun%2Bhttp://127.0.0.1:{grpc_port}/proxy"
     assert address in printed
-    with urllib.request.urlopen(f"http://127.0.0.1:{web_port}/", timeout=10) as page:
-        assert page.status == 200 and b"<html" in page.read().lower()
-    processes.stop(proc)
+    with urllib.request.urlopen(address, timeout=10) as page:
+        html = page.read()
+        assert page.status == 200 and b"<html" in html.lower()
+    assert html.count(b'memory_limit: "96MiB"') == 1, "the viewer is started with the limit"
+    with urllib.request.urlopen(f"http://127.0.0.1:{web_port}/re_viewer.js", timeout=10) as js:
+        assert b"wasm_bindgen" in js.read()
+    # A browser that leaves mid-download (a reload) is no error.
+    with urllib.request.urlopen(f"http://127.0.0.1:{web_port}/re_viewer_bg.wasm", timeout=10) as w:
+        assert w.headers["Content-Type"] == "application/wasm" and w.read(4) == b"\0asm"
+    out = processes.stop(proc)
     assert proc.returncode == 0
+    assert "Traceback" not in printed + out
     # The web server child went with it: its port is free again.
     with pytest.raises(OSError):
         urllib.request.urlopen(f"http://127.0.0.1:{web_port}/", timeout=2)
+
+
+def test_a_page_memory_limit_that_is_no_size_is_one_line():
+    """--page-memory-limit must be a size Rerun reads; anything else is one line, exit 2."""
+    done = subprocess.run(
+        [sys.executable, "-m", "services.cli", "viewer", "--web", "--page-memory-limit", "lots"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == 2
+    assert "--page-memory-limit 'lots' is no size" in done.stderr
+    assert "Traceback" not in done.stderr
 
 
 def test_scene_log_draws_an_empty_detection_array_as_no_box(tmp_path):
