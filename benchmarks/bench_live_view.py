@@ -30,9 +30,12 @@ a picture: at least half of each panel's pixels are not the viewer's white backg
 loading spinner on white does not count). The 3D view (frustum, table, boxes) is drawn
 from static data plus the newest boxes: look at the screenshots.
 
-Memory: the JS heap in use (CDP Performance.getMetrics) and the resident memory of the
+Memory: the JS heap in use (CDP Performance.getMetrics), the viewer's wasm memory (it only
+grows, so it is the high-water mark of the viewer's heap), and the resident memory of the
 browser: of all its processes, and of its renderers (the page) alone, from /proc, counting
-only the processes this run started.
+only the processes this run started. The page's console says when the viewer dropped old data
+to stay within its memory limit ("GC result"), and when its wasm was loaded and the app
+started: the page's own start-up, before any data.
 
   .venv/bin/python benchmarks/bench_live_view.py                          # after, 60 s late
   .venv/bin/python benchmarks/bench_live_view.py --late-s 0 --watch-s 60  # at start
@@ -73,7 +76,7 @@ from schemas import Image
 PAGE_SCRIPT = r"""
 const { chromium } = require('playwright-core');
 const fs = require('fs');
-const [url, watchS, shots, shotEveryS, profile] = process.argv.slice(2);
+const [url, watchS, shots, shotEveryS, profile, firstShotS] = process.argv.slice(2);
 
 // Protobuf, schema-less: a list of [field number, value]; a length-delimited value is kept
 // both as bytes (for strings) and, when it parses, as a nested list.
@@ -135,19 +138,38 @@ const within = (promise, ms) => Promise.race([promise, new Promise((_, no) => se
            '--disable-sync', '--no-first-run'],
   });
   const page = browser.pages()[0] || await browser.newPage();
+  const t0 = Date.now();
   // Count the page's frames: every requestAnimationFrame callback that runs.
   await page.addInitScript(() => {
+    // The viewer's wasm memory: it only grows, so it is the high-water mark of the viewer's heap.
+    const instantiate = WebAssembly.instantiate;
+    WebAssembly.instantiate = async (...a) => {
+      const r = await instantiate(...a);
+      window.__wasmMemory = (r.instance || r).exports.memory;
+      return r;
+    };
     window.__frames = 0;
     const raf = window.requestAnimationFrame.bind(window);
     window.requestAnimationFrame = (cb) => raf((t) => { window.__frames += 1; cb(t); });
   });
+  // The page's own start-up, from its console: the wasm fetched and compiled, the app started.
+  page.on('console', (m) => {
+    const text = m.text();
+    if (/loading wasm|Wasm loaded|App started|memory limit|GC result/.test(text)) console.log(JSON.stringify({ event: 'console', t: (Date.now() - t0) / 1000, text }));
+  });
+  if (process.env.PAGE_MEMORY_LIMIT) {
+    await page.route(/\/(index\.html)?(\?.*)?$/, async (route) => {
+      const r = await route.fetch();
+      const body = (await r.text()).replace('const options = {', `const options = { memory_limit: ${JSON.stringify(process.env.PAGE_MEMORY_LIMIT)},`);
+      await route.fulfill({ response: r, body });
+    });
+  }
   const cdp = await browser.newCDPSession(page);
   await cdp.send('Performance.enable');
-  const t0 = Date.now();
   console.log(JSON.stringify({ event: 'open', wall: Date.now() / 1000 }));
   try { await page.goto(url, { timeout: 60000 }); } catch (e) { console.log(JSON.stringify({ event: 'goto', error: String(e).slice(0, 200) })); }
   const end = t0 + Number(watchS) * 1000;
-  let lastFrames = 0, lastT = Date.now(), nextShot = t0 + Number(shotEveryS) * 1000, n = 0;
+  let lastFrames = 0, lastT = Date.now(), nextShot = t0 + Number(firstShotS) * 1000, n = 0;
   for (;;) {
     const now = Date.now();
     const row = { t: (now - t0) / 1000, wall: now / 1000 };
@@ -155,7 +177,8 @@ const within = (promise, ms) => Promise.race([promise, new Promise((_, no) => se
       const raw = await within(page.evaluate(() => window._handle ? Array.from(window._handle.viewer_state()) : null), 5000);
       row.state = raw ? viewerState(Uint8Array.from(raw)) : null;
       row.wall = Date.now() / 1000;  // when the state was read
-      const frames = await within(page.evaluate(() => window.__frames), 5000);
+      const [frames, wasm] = await within(page.evaluate(() => [window.__frames, window.__wasmMemory ? window.__wasmMemory.buffer.byteLength : null]), 5000);
+      row.wasm = wasm;
       row.fps = (frames - lastFrames) / Math.max((Date.now() - lastT) / 1000, 1e-3);
       lastFrames = frames; lastT = Date.now();
     } catch (e) { row.error = String(e).slice(0, 200); }
@@ -285,6 +308,9 @@ def main() -> None:
     parser.add_argument("--node-modules", type=Path, default=Path("/tmp/pw/node_modules"))
     parser.add_argument("--shots", type=Path, default=Path("/tmp/live_view"))
     parser.add_argument("--shot-every-s", type=float, default=5.0)
+    parser.add_argument(
+        "--first-shot-s", type=float, default=10.0, help="the first screenshot (the goal's 10 s)"
+    )
     parser.add_argument("--label", default="", help="a name for this run in the summary")
     args = parser.parse_args()
     args.shots.mkdir(parents=True, exist_ok=True)
@@ -293,6 +319,8 @@ def main() -> None:
 
     published = Published()
     rows: list[dict[str, object]] = []
+    gcs: list[float] = []
+    """When the page dropped old data to stay within its memory limit."""
     loads = [load_average()]
     with private_router() as endpoint, bus.open_bus(bus_args(endpoint)) as b:
         b.subscribe("camera/image_raw", Image, published)
@@ -342,6 +370,7 @@ def main() -> None:
                         str(args.shots),
                         str(args.shot_every_s),
                         str(Path(profile) / "profile"),
+                        str(args.first_shot_s),
                     ],
                     stdout=subprocess.PIPE,
                     env=node_env,
@@ -350,6 +379,12 @@ def main() -> None:
                 assert page.stdout is not None
                 for line in page.stdout:
                     sample = json.loads(line)
+                    if sample.get("event") == "console":
+                        text = sample["text"].strip()
+                        if "GC result" in text:
+                            gcs.append(float(sample["t"]))
+                        print(f"t {sample['t']:6.1f} s  page: {text[:160]}", flush=True)
+                        continue
                     if "t" not in sample:
                         continue
                     rows.append(sample)
@@ -392,7 +427,7 @@ def main() -> None:
                     print(
                         f"t {sample['t']:6.1f} s  sim {(newest or 0) / 1e9:7.1f} s  page {'-' if shown is None else f'{shown / 1e9:7.1f} s'}"
                         f"  behind {'   -   ' if wall is None else f'{wall:6.2f} s'} (sim {'  -  ' if sim is None else f'{sim:5.1f}'})"
-                        f"  {sample.get('fps', 0):4.1f} fps  heap {(sample.get('heap') or 0) / 2**20:5.1f} MiB"
+                        f"  {sample.get('fps', 0):4.1f} fps  heap {(sample.get('heap') or 0) / 2**20:5.1f} MiB  wasm {(sample.get('wasm') or 0) / 2**20:5.0f} MiB"
                         f"  RSS {sample['rss']:6.0f} MiB (renderer {sample['renderer']:5.0f})"
                         + (
                             f"  shot {Path(sample['shot']).name} colour {sample['fills']['colour']:.0%} depth {sample['fills']['depth']:.0%}{' WHOLE' if sample['whole'] else ''}"
@@ -416,10 +451,12 @@ def main() -> None:
                     p.wait(timeout=10)
                 except subprocess.TimeoutExpired:
                     p.kill()
-    summarise(args, rows, loads)
+    summarise(args, rows, loads, gcs)
 
 
-def summarise(args: argparse.Namespace, rows: list[dict[str, object]], loads: list[str]) -> None:
+def summarise(
+    args: argparse.Namespace, rows: list[dict[str, object]], loads: list[str], gcs: list[float]
+) -> None:
     label = args.label or str(args.repo)
     seen = [r for r in rows if r.get("behind_wall_s") is not None]
     print(f"--- summary: {label}")
@@ -448,6 +485,10 @@ def summarise(args: argparse.Namespace, rows: list[dict[str, object]], loads: li
         "whole scene (pictures in both panels, no view reports) "
         + (f"first in the screenshot at {whole['t']:.1f} s" if whole else "never")
     )
+    print(
+        f"the page dropped old data {len(gcs)} times"
+        + (f", first at {gcs[0]:.0f} s" if gcs else "")
+    )
     fps = [float(r["fps"]) for r in rows if r.get("fps") is not None]  # type: ignore[arg-type]
     print(f"page frames a second: median {median(fps):.1f}")
     problems = sorted({p for r in rows for p in r.get("problems", [])})  # type: ignore[attr-defined]
@@ -456,10 +497,11 @@ def summarise(args: argparse.Namespace, rows: list[dict[str, object]], loads: li
     if rows:
         for name, key in (
             ("JS heap", "heap"),
+            ("wasm memory", "wasm"),
             ("browser RSS", "rss"),
             ("renderer RSS", "renderer"),
         ):
-            scale = 2**20 if key == "heap" else 1
+            scale = 2**20 if key in ("heap", "wasm") else 1
             values = [float(r.get(key) or 0) / scale for r in rows]  # type: ignore[arg-type]
             minute = [float(r.get(key) or 0) / scale for r in rows if float(r["t"]) >= 60][:1]  # type: ignore[arg-type]
             print(
