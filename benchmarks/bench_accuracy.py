@@ -117,6 +117,8 @@ def main() -> None:
         ("seed's world, noise-free", [seed_scene()], PRESETS["none"]),
         ("random, noise-free", None, PRESETS["none"]),
         ("random, sigma 1 mm", None, NoiseSpec(model="gaussian", sigma_m=0.001)),
+        ("random, d435", None, PRESETS["d435"]),
+        ("random, azure_kinect", None, PRESETS["azure_kinect"]),
         (
             "empty tables, sigma 3 mm + speckle + edges",
             None,

@@ -61,7 +61,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
+from scipy import ndimage, spatial
 
 from onebox.geometry import Intrinsics
 from onebox.perception import faces, segment
@@ -784,6 +784,18 @@ def _measure_all(
         points = np.stack([a[part], b[part]], axis=1)
         rect_area = (np.ptp(points @ ax) + footprint[t]) * (np.ptp(points @ perp) + footprint[t])
         fill = min(float(whole_area[t]) / rect_area, 1.0)
+        if (
+            tol[t] > RAGGED_TOLERANCE_M
+            and fill >= RAGGED_MIN_FILL
+            and rect.hidden_sides == 0
+            and len(points) >= 3
+        ):
+            # Noise this large makes a top's outline ragged (readings near its edge fall in and
+            # out of the tolerance): its hull, grown by half a footprint, measures the shape of
+            # a top seen whole that already nearly fills its rectangle (a narrow strip, such as
+            # a pallet's margin under the cartons, loses more of its area to the ragged edge
+            # and stays what it is).
+            fill = max(fill, min(_hull_area(points, float(footprint[t])) / rect_area, 1.0))
         flatness = max(0.0, 1.0 - max(rms[t] - 0.5 * tol[t], 0.0) / tol[t])
         p.score = fill * flatness
         if tilt[t] > settings.max_top_tilt_deg or p.score < settings.min_score:
@@ -796,6 +808,25 @@ def _measure_all(
             continue
         p.is_box = True
     return plateaus
+
+
+RAGGED_TOLERANCE_M = 0.01
+"""A top whose height tolerance is wider than this (noise of 3 mm or more) is measured by its
+hull: a disc still fills pi/4 of its rectangle, a ragged rectangle nearly all of it ..."""
+RAGGED_MIN_FILL = 0.72
+"""... when its own readings fill at least this share of its rectangle."""
+
+
+def _hull_area(points: Float64Array, footprint_m: float) -> float:
+    """The area of the points' convex hull grown by half a footprint all round (outline pixel
+    middles lie half a footprint inside the edge)."""
+    try:
+        hull = spatial.ConvexHull(points)
+    except spatial.QhullError:  # all on a line: no area
+        return 0.0
+    half = 0.5 * footprint_m
+    # In 2-D, ConvexHull's "volume" is the area and its "area" the perimeter.
+    return float(hull.volume + hull.area * half + math.pi * half * half)
 
 
 LEDGE_REACH_PX = 12
