@@ -105,18 +105,20 @@ def face_bottoms(
         offset, seen, span_px = reading(edge_mid + out * shift[..., np.newaxis])
     on = seen & (np.abs(offset) <= tol)
     beyond = seen & (offset < -tol)
+    # Every line of a side facing the camera that spans pixels enough, all at once.
+    use = facing[:, :, np.newaxis] & (span_px >= MIN_FACE_PX)
+    box_of, side_of, line_of = np.nonzero(use)
+    low, high, ended = _line_ends(
+        on[box_of, side_of, line_of], beyond[box_of, side_of, line_of], heights[box_of]
+    )
+    px = span_px[box_of, side_of, line_of]
+    # Each point is read at the pixel it falls in, whose ray meets the face up to half a
+    # pixel's height away.
+    half_px = 0.5 * heights[box_of, 0] / px
     result: list[Bottom | None] = []
     for i in range(n_boxes):
-        ends: list[tuple[float, float, float]] = []
-        for k in np.flatnonzero(facing[i]):
-            for line in np.flatnonzero(span_px[i, k] >= MIN_FACE_PX):
-                end = _line_end(on[i, k, line], beyond[i, k, line], heights[i])
-                if end is not None:
-                    # Each point is read at the pixel it falls in, whose ray meets the face
-                    # up to half a pixel's height away.
-                    px = float(span_px[i, k, line])
-                    half_px = 0.5 * heights[i, 0] / px
-                    ends.append((end[0] - half_px, end[1] + half_px, px))
+        mine = np.flatnonzero(ended & (box_of == i))
+        ends = [(low[j] - half_px[j], high[j] + half_px[j], px[j]) for j in mine]
         result.append(_agreed(ends, float(tolerances_m[i])))
     return result
 
@@ -146,27 +148,39 @@ def _agreed(ends: list[tuple[float, float, float]], slack_m: float) -> Bottom | 
     return None
 
 
-def _line_end(
-    on: npt.NDArray[np.bool_], beyond: npt.NDArray[np.bool_], heights: Float64Array
-) -> tuple[float, float] | None:
-    """Going down one line, past the points that say nothing: the heights of the last point
-    on the face and the first beyond it where RUN_OF of RUN points on it are followed by
-    RUN_OF of RUN beyond it (a noisy reading is outvoted); None when the face does not end
-    so. Points that flip between on and beyond are a face seen nearly edge-on, not its end."""
-    said = np.flatnonzero(on | beyond)
-    if len(said) < 2 * RUN:
-        return None
-    is_on, is_beyond = on[said], beyond[said]
-    kernel = np.ones(RUN)
-    on_n = np.convolve(is_on, kernel, "valid")  # on_n[j]: on among said[j .. j + RUN - 1]
-    beyond_n = np.convolve(is_beyond, kernel, "valid")
-    ends = np.flatnonzero((beyond_n[RUN:] >= RUN_OF) & (on_n[:-RUN] >= RUN_OF)) + RUN
-    ends = ends[is_beyond[ends]]
-    if not len(ends):
-        return None
-    k = int(ends[0])
-    last_on = np.flatnonzero(is_on[:k])[-1]
-    return float(heights[said[k]]), float(heights[said[last_on]])
+def _line_ends(
+    on: BoolArray, beyond: BoolArray, heights: Float64Array
+) -> tuple[Float64Array, Float64Array, BoolArray]:
+    """Going down each line (rows of ``on``, ``beyond`` and ``heights``), past the points that
+    say nothing: the heights of the first point beyond the face and the last on it, where
+    RUN_OF of RUN points on it are followed by RUN_OF of RUN beyond it (a noisy reading is
+    outvoted), and whether the line ends so. Points that flip between on and beyond are a
+    face seen nearly edge-on, not its end."""
+    rows, samples = on.shape
+    said = on | beyond
+    # Each row's points that say something, first, in order.
+    order = np.argsort(~said, axis=1, kind="stable")
+    s_on = np.take_along_axis(on, order, 1)
+    s_beyond = np.take_along_axis(beyond, order, 1)
+    n_said = said.sum(axis=1)
+    zero = np.zeros((rows, 1), dtype=np.int64)
+    c_on = np.concatenate([zero, np.cumsum(s_on, axis=1)], axis=1)
+    c_beyond = np.concatenate([zero, np.cumsum(s_beyond, axis=1)], axis=1)
+    # k: the first point of a window mostly beyond, right after a window mostly on.
+    k = np.arange(RUN, samples - RUN + 1)
+    on_before = c_on[:, k] - c_on[:, k - RUN]
+    beyond_after = c_beyond[:, k + RUN] - c_beyond[:, k]
+    is_end = (on_before >= RUN_OF) & (beyond_after >= RUN_OF) & s_beyond[:, k]
+    is_end &= (k + RUN)[np.newaxis, :] <= n_said[:, np.newaxis]
+    ended = is_end.any(axis=1)
+    first = k[np.argmax(is_end, axis=1)]
+    # The last point on the face before it: the highest index on among those before k.
+    before = np.arange(samples)[np.newaxis, :] < first[:, np.newaxis]
+    last_on = np.max(np.where(s_on & before, np.arange(samples), -1), axis=1)
+    at = np.arange(rows)
+    low = heights[at, order[at, first]]
+    high = heights[at, order[at, np.maximum(last_on, 0)]]
+    return low, high, ended
 
 
 class _Reading:
