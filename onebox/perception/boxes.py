@@ -29,8 +29,9 @@ How a picture is read (whole-array work; Python loops only over tops, a few scal
    pass (:func:`onebox.perception.rectangle.fit_rectangles`).
 5. Not a box: a top touching the picture's border (cut off), smaller than ``min_top_area_m2``,
    not parallel to the support, not flat, filling less than ``min_score`` of its rectangle
-   (a disc fills pi/4), or curved: loosening the height tolerance four-fold widens a curved
-   top (cylinder, ball) but not a box's, whose sides drop straight down.
+   (a disc fills pi/4; under noise of 3 mm or more, a top seen whole by its hull), or curved:
+   loosening the height tolerance four-fold widens a curved top (cylinder, ball) but not a
+   box's, whose sides drop straight down.
 6. What each box stands on. Lines of probe points go out from each side at the height of each
    lower level (the support and every lower top); along each line the first surface seen (not
    the box itself, nothing higher in front) says whether the level is there or lower. A level
@@ -49,6 +50,10 @@ How a picture is read (whole-array work; Python loops only over tops, a few scal
    than half of it).
    A top with a hidden side that something standing well off it (a taller object in front)
    may hide by more than half its seen extent is left out: its size is unknown.
+   Then each box's side faces (:mod:`onebox.perception.faces`): faces that end well above
+   the base raise it to the level between where they are last seen and where the camera sees
+   under the box (or to their bottom, when no level is there: a box over one it hides), and a
+   top that box hides a side of becomes a level.
 7. The height is the top's distance from its base; the centre is the rectangle's middle less
    half the height along the normal.
 """
