@@ -258,18 +258,23 @@ def web_server(
         start_new_session=True,
     )
     try:
-        _wait_for_port(grpc_port, proc, timeout_s=20.0)
-        _wait_for_port(child_web_port, proc, timeout_s=20.0)
-        # Another viewer starting at the same moment may have taken the port between our
-        # check and the server's bind: then the port answers, but not for our server, which
-        # exits at once. Give it that moment before trusting the port.
+        # Another viewer starting at the same moment may have taken a port between our check
+        # and the server's bind: then the port answers, but not for our server, which exits
+        # at once (while we wait for its other port, or just after). Give it that moment
+        # before trusting the ports.
         try:
+            _wait_for_port(grpc_port, proc, timeout_s=20.0)
+            _wait_for_port(child_web_port, proc, timeout_s=20.0)
             proc.wait(timeout=SETTLE_S)
         except subprocess.TimeoutExpired:
             pass
-        else:
+        except ViewerError:
+            if proc.poll() is None:
+                raise
+        if proc.poll() is not None:
             raise PortTaken(
-                f"the Rerun web server could not listen on {grpc_port} or {child_web_port}"
+                f"the Rerun web server could not listen on {grpc_port} or {child_web_port} "
+                f"(exit code {proc.returncode})"
             )
         with page_server(web_port, child_web_port, page_memory_limit):
             yield f"rerun+http://127.0.0.1:{grpc_port}/proxy"
