@@ -218,7 +218,9 @@ def test_record_a_running_sim(processes, test_bus, tmp_path):
     again = Inbox()
     test_bus.subscribe_raw("**", again)
     replay = processes.start("replay", str(out), "--rate", "0", "--keys", "camera/image_raw")
-    again.wait(has_key("camera/image_raw", 5))
+    # A capture's clock may come after its picture: wait for every one of both.
+    clocks = has_key("clock", len(recorded["clock"]))
+    again.wait(lambda items: has_key("camera/image_raw", 5)(items) and clocks(items))
     processes.stop(replay)
     replayed = [(k, p) for k, p in again.items]
     assert [p for k, p in replayed if k == "clock"] == recorded["clock"]
