@@ -387,7 +387,8 @@ def test_replay_keeps_bytes_order_and_spacing(processes, test_bus, spaced_record
 
     test_bus.subscribe_raw("**", on_sample)
     proc = processes.start("replay", str(path), "--rate", "1")
-    inbox.wait(has_key("camera/camera_info", 20))
+    infos, clocks = has_key("camera/camera_info", 20), has_key("clock", 20)
+    inbox.wait(lambda items: infos(items) and clocks(items))
     out = processes.stop(proc)
     assert proc.returncode == 0, out
     data = [(k, p) for k, p, _ in arrivals if k != "clock"]
