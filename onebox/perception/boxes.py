@@ -1395,15 +1395,15 @@ def _raise_to_faces(
     no level is there (a box on one hidden under it)."""
     if not boxes:
         return
-    rects = [b.rect for b in boxes]
-    assert all(r is not None for r in rects)
+    rects = [b.rect for b in boxes if b.rect is not None]
+    assert len(rects) == len(boxes)  # every box has its rectangle
     tolerance = np.array(
         [max(FACE_FOOTPRINTS * b.footprint_m, FACE_TOLERANCE_M, b.tolerance_m) for b in boxes]
     )
     bottoms = faces.face_bottoms(
-        np.array([r.middle for r in rects]),  # type: ignore[union-attr]
-        np.array([r.axis for r in rects]),  # type: ignore[union-attr]
-        np.array([[r.length_m / 2, r.width_m / 2] for r in rects]),  # type: ignore[union-attr]
+        np.array([r.middle for r in rects]),
+        np.array([r.axis for r in rects]),
+        np.array([[r.length_m / 2, r.width_m / 2] for r in rects]),
         np.array([b.height_m for b in boxes]),
         tolerance,
         depth,
