@@ -37,7 +37,8 @@ BoolArray = npt.NDArray[np.bool_]
 LINES = np.linspace(-0.35, 0.35, 5)
 """Where the lines run down each side, as shares of the side's length from its middle."""
 SAMPLES = 48
-"""Points down each line, from just under the top to the surface."""
+"""Points down each line, from just under the top (FIRST_SHARE of its height) to the surface."""
+FIRST_SHARE = 0.97
 RUN = 4
 RUN_OF = 3
 """A face ends where RUN_OF of RUN points in a row are on it, and of the next RUN beyond it."""
@@ -87,7 +88,7 @@ def face_bottoms(
     # The camera stands over the plane's origin: a side faces it when the origin lies out past
     # the side's line.
     facing = np.einsum("nsk,nsk->ns", -edge_mid, out) > 0.0
-    share = np.linspace(0.97, 0.0, SAMPLES)  # just under the top, down to the surface
+    share = np.linspace(FIRST_SHARE, 0.0, SAMPLES)
     heights = tops_m[:, np.newaxis] * share[np.newaxis, :]  # N x S
     tol = tolerances_m[:, np.newaxis, np.newaxis, np.newaxis]
     reading = _Reading(depth_m, lens, basis, camera_height_m, heights, out, along, half_along)
@@ -125,7 +126,7 @@ def face_bottoms(
 
 def resolution_m(top_m: float) -> float:
     """How far apart the points down a face of a top this high lie."""
-    return top_m * 0.97 / (SAMPLES - 1)
+    return top_m * FIRST_SHARE / (SAMPLES - 1)
 
 
 def _agreed(ends: list[tuple[float, float, float]], slack_m: float) -> Bottom | None:
