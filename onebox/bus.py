@@ -377,7 +377,10 @@ class Bus:
                 self.session,
                 key_expr,
                 on_sample,
-                history=zenoh.ext.HistoryConfig(detect_late_publishers=True, max_samples=1),
+                # No max_samples: on a wildcard it bounds the whole history query, not each
+                # key, so a recorder on `**` got one latched key of several (tf_static missed
+                # in 4 of 12 tries). Each latched publisher caches only its last sample.
+                history=zenoh.ext.HistoryConfig(detect_late_publishers=True),
                 subscriber_detection=True,
             )
         else:

@@ -70,6 +70,21 @@ def test_no_subscriber_means_no_match(router: str) -> None:
         assert p.wait_for_subscribers(10)
 
 
+@pytest.mark.parametrize("attempt", range(3))
+def test_a_late_wildcard_subscriber_gets_every_latched_key(router: str, attempt: int) -> None:
+    """A subscriber on ``**`` that joins late (a recorder) gets the last sample of every latched
+    key, not only of the first publisher to answer its history query."""
+    keys = ("tf_static", "support", "scene/boxes")
+    with bus.open_bus(bus_args(router)) as a:
+        for key in keys:
+            a.publisher(key, TFMessage, latched=True).publish_bytes(key.encode())
+        with bus.open_bus(bus_args(router)) as b:
+            inbox = Inbox()
+            b.subscribe_raw("**", inbox, history=True)
+            items = inbox.wait(lambda items: {k for k, _ in items} >= set(keys), timeout_s=10)
+    assert sorted(items) == sorted((key, key.encode()) for key in keys)
+
+
 def test_pictures_drop_and_small_messages_block(test_bus: bus.Bus) -> None:
     """Pictures are dropped under congestion at low priority; detections and the clock block."""
     picture = test_bus.publisher("camera/depth/image_raw", Image)
