@@ -10,6 +10,7 @@ import pytest
 
 from onebox.perception.boxes import BoxFinder, FinderSettings, find_boxes
 from onebox.perception.support import fit_support
+from onebox.testing.judged import yaw_error
 from onebox.testing.raycast import (
     Box,
     Camera,
@@ -50,13 +51,6 @@ def random_boxes(rng: np.random.Generator, count: int, spread_m: float) -> tuple
             box_on(Plane(), float(x), float(y), size, float(rng.uniform(-90, 90)), colour)  # type: ignore[arg-type]
         )
     return tuple(boxes)
-
-
-def yaw_error_deg(found: float, truth: float, square: bool) -> float:
-    """Angle between two yaws, modulo 180 degrees (90 for a square top)."""
-    period = 90.0 if square else 180.0
-    diff = (found - truth) % period
-    return min(diff, period - diff)
 
 
 def match(found, truth: tuple[Box, ...]):
@@ -100,7 +94,7 @@ def test_noise_free_boxes_found_exactly(seed, count, distance_m, tilt_deg):
     for box, true in match(found.boxes, truth):
         assert math.dist(box.centre, true.centre) <= 0.0025 * distance_m * 1.5
         square = abs(true.size[0] - true.size[1]) < 0.01
-        assert yaw_error_deg(box.yaw_deg, true.yaw_deg(), square) <= 1.0
+        assert yaw_error(box.yaw_deg, true.yaw_deg(), square) <= 1.0
         assert abs(box.size[0] - max(true.size[:2])) <= 0.002 * scale
         assert abs(box.size[1] - min(true.size[:2])) <= 0.002 * scale
         assert abs(box.size[2] - true.size[2]) <= 0.001
@@ -119,7 +113,7 @@ def test_sigma_1mm_accuracy():
     for box, true in match(found.boxes, truth):
         centre_errors.append(math.dist(box.centre, true.centre))
         square = abs(true.size[0] - true.size[1]) < 0.01
-        assert yaw_error_deg(box.yaw_deg, true.yaw_deg(), square) <= 2.0
+        assert yaw_error(box.yaw_deg, true.yaw_deg(), square) <= 2.0
         assert abs(box.size[0] - max(true.size[:2])) <= 0.004
         assert abs(box.size[1] - min(true.size[:2])) <= 0.004
         assert abs(box.size[2] - true.size[2]) <= 0.002
