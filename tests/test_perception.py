@@ -335,6 +335,36 @@ def test_box_over_a_box_it_hides_measured_from_its_faces(distance_m, tilt_deg):
     assert found.boxes[0].size[2] == pytest.approx(0.07, abs=0.003)
 
 
+@pytest.mark.parametrize(("distance_m", "tilt_deg"), [(0.9, 25.0), (1.2, 15.0)])
+def test_box_flush_on_a_box_of_nearly_its_footprint_measured_from_the_seam(distance_m, tilt_deg):
+    """A box on one 3 mm wider each way, turned 6 degrees from it: the faces run down in one
+    plane to the table (depth cannot tell where one box ends), but the colour changes where
+    they meet, level across each face. With colour it is measured from there; from depth alone
+    it is one box from the table."""
+    lower = box_on(Plane(), 0.04, 0.02, (0.066, 0.026, 0.07), 20.0, colour=(60, 90, 190))
+    upper = box_on(lower, 0.0, 0.0, (0.06, 0.02, 0.13), 6.0, colour=(190, 150, 100))
+    camera = Camera.tilted(distance_m, tilt_deg, width=640, height=480)
+    depth, colour = render(Scene(camera, Plane(), (lower, upper)))
+    found = find_boxes(depth, camera.lens, camera.camera_to_world, colour)
+    assert len(found.boxes) == 1
+    assert found.boxes[0].size[2] == pytest.approx(0.13, abs=0.003)
+    depth_only = find_boxes(depth, camera.lens, camera.camera_to_world)
+    assert depth_only.boxes[0].size[2] == pytest.approx(0.20, abs=0.003)
+
+
+def test_colour_step_where_a_lower_box_beside_meets_a_face_is_no_seam():
+    """A tall box with a lower one of another colour touching it in front, flush with its
+    side: the colour changes down the tall box's face where the lower box's top meets it, but
+    the tall box stands on the table."""
+    tall = box_on(Plane(), 0.0, 0.0, (0.08, 0.05, 0.2), 0.0, colour=(190, 150, 100))
+    low = box_on(Plane(), 0.0, -0.065, (0.08, 0.08, 0.07), 0.0, colour=(60, 90, 190))
+    camera = Camera.tilted(0.9, 20.0, width=640, height=480)
+    depth, colour = render(Scene(camera, Plane(), (tall, low)))
+    found = find_boxes(depth, camera.lens, camera.camera_to_world, colour)
+    heights = sorted(round(b.size[2], 3) for b in found.boxes)
+    assert heights == pytest.approx([0.07, 0.2], abs=0.002)
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_boxes_through_d435_noise_at_2_3_m(seed):
     """The D435 preset 2.3 m away (sigma 19 mm, holes, flying pixels, speckle): both boxes

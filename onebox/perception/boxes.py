@@ -53,7 +53,9 @@ How a picture is read (whole-array work; Python loops only over tops, a few scal
    Then each box's side faces (:mod:`onebox.perception.faces`): faces that end well above
    the base raise it to the level between where they are last seen and where the camera sees
    under the box (or to their bottom, when no level is there: a box over one it hides), and a
-   top that box hides a side of becomes a level.
+   top that box hides a side of becomes a level. Faces running flush down onto a box of
+   nearly the same footprint end where their colour changes, level across the face, unless a
+   top at that height reaches out past that side (a box beside, whose top meets the face).
 7. The height is the top's distance from its base; the centre is the rectangle's middle less
    half the height along the normal.
 """
@@ -257,7 +259,7 @@ def find_boxes(
     basis = _plane_basis(support, camera_to_world)
     boxes = [p for p in plateaus if p.is_box]
     _bases(boxes, plateaus, height_m, labels_top, lens, support, settings)
-    _raise_to_faces(boxes, plateaus, depth, lens, support, settings)
+    _raise_to_faces(boxes, plateaus, depth, colour, lens, support, settings)
     _shadowed_sides(boxes, support.offset_camera_m, settings)
     reported = [b for b in boxes if not b.platform and not _extent_unknown(b)]
     return Found(support, _report(reported, support, basis, camera_to_world, settings), frame)
@@ -1384,6 +1386,7 @@ def _raise_to_faces(
     boxes: list[_Plateau],
     plateaus: list[_Plateau],
     depth: Float32Array,
+    colour: npt.NDArray[np.uint8] | None,
     lens: Intrinsics,
     support: Support,
     settings: FinderSettings,
@@ -1410,14 +1413,28 @@ def _raise_to_faces(
         lens,
         _plane_basis(support, None),
         support.offset_camera_m,
+        colour,
     )
     tops: list[tuple[float, _Plateau | None]] = [(p.height_m, p) for p in plateaus]
     for box, bottom, tol in zip(boxes, bottoms, tolerance, strict=True):
-        if bottom is None:
-            continue
         # The support, every top, and the box's own ledge.
         levels = [(0.0, None), *tops, *([] if box.ledge_m is None else [(box.ledge_m, None)])]
         slack = faces.resolution_m(box.height_m) + tol
+        if (
+            bottom is not None
+            and bottom.seam
+            and any(
+                p is not None and p is not box and _beside(p, box, bottom.seam_sides)
+                for h, p in levels
+                if bottom.low_m - slack <= h <= bottom.high_m + slack
+            )
+        ):
+            # A seam in the colour where a top beside the box meets its face (the face goes on
+            # down past that top, in one plane with it), not a box under it, of which only a
+            # rim round the box's outline is seen.
+            bottom = bottom.unseamed
+        if bottom is None:
+            continue
         if (
             bottom.middle_m <= box.base_m + max(settings.min_height_m, 2.0 * slack)
             or bottom.middle_m >= box.height_m - settings.min_height_m
@@ -1430,6 +1447,7 @@ def _raise_to_faces(
             (bottom.high_m - h, h, p)
             for h, p in levels
             if bottom.low_m - slack <= h <= bottom.high_m + slack
+            and p is not box
             and (p is None or _reaches_under(p, box) or _past_hidden_side(p, box))
         ]
         if near:
@@ -1446,6 +1464,24 @@ def _raise_to_faces(
                     p.platform = True
         else:
             box.base_m, box.on_plateau = bottom.middle_m, None
+
+
+SEAM_REACH_M = 0.015
+"""A top at a colour seam's height that reaches out past a box's rectangle by more than this
+stands beside the box; a box under it, flush, shows at most a rim round its outline."""
+
+
+def _beside(lower: _Plateau, upper: _Plateau, sides: tuple[tuple[float, float], ...]) -> bool:
+    """Whether the lower top stands beside the upper box past one of ``sides`` (outward
+    normals): its rectangle reaches out past that side by more than SEAM_REACH_M and it
+    touches the box."""
+    if lower.rect is None or upper.rect is None or not _touch(lower, upper):
+        return False
+    rel = lower.rect.corners - np.asarray(upper.rect.middle)
+    return any(
+        float(np.max(rel @ np.array(o))) - _half_extent(upper.rect, *o) > SEAM_REACH_M
+        for o in sides
+    )
 
 
 FACE_TOLERANCE_M = 0.003

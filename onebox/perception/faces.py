@@ -19,12 +19,19 @@ on it and the first beyond. A box is solid down to its bottom, so its bottom is 
 one that two lines agree on, on any side: where a side runs flush with the box under it, the
 face goes on down, seen as one, and says nothing. None when no two lines see the face end
 above the surface.
+
+Where the sides run flush (a box on one of nearly its footprint) depth says nothing, but the
+colour may: with the colour picture, a line whose points on the face are all of one even shade
+above a point and of another below it (a step of SEAM_STEP levels or more), at the same height
+as another line of the same side, ends there too (a ``seam``; the caller tells it from a top
+beside the box that meets the face there).
 """
 
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
+import warnings
+from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -44,6 +51,10 @@ RUN_OF = 3
 """A face ends where RUN_OF of RUN points in a row are on it, and of the next RUN beyond it."""
 MIN_FACE_PX = 6.0
 """A face that spans fewer pixels from top to bottom than this (seen edge-on) says nothing."""
+SEAM_STEP = 8.0
+"""The least brightness step (0..255) down a face between two boxes' faces."""
+SEAM_GAP = 2
+"""Points skipped between the shades above and below a seam (pixels blended across it)."""
 
 
 @dataclass(frozen=True)
@@ -54,6 +65,13 @@ class Bottom:
     low_m: float
     high_m: float
     middle_m: float
+    seam: bool = False
+    """Seen as a seam in the colour (a face going on down in one plane), not as a face's end:
+    the level under it may also be a top beside the box, which meets the face there."""
+    unseamed: Bottom | None = None
+    """For a seam: the bottom the faces' ends alone show."""
+    seam_sides: tuple[tuple[float, float], ...] = ()
+    """For a seam: the outward normals (plane coordinates) of the sides it is seen on."""
 
 
 def face_bottoms(
@@ -66,13 +84,15 @@ def face_bottoms(
     lens: Intrinsics,
     basis: Float64Array,
     camera_height_m: float,
+    colour: npt.NDArray[np.uint8] | None = None,
 ) -> list[Bottom | None]:
     """Each box's bottom as its faces show it (see the module docstring).
 
     ``middles`` (N x 2), ``axes`` (N x 2, unit, the length's) and ``halves`` (N x 2: half the
     length and half the width) are the tops' rectangles in plane coordinates (a = e1 . p,
     b = e2 . p); ``tops_m`` their heights; ``tolerances_m`` (N) how far across a face's plane
-    a reading may lie and still be on it.
+    a reading may lie and still be on it; ``colour`` (H x W x 3, registered with the depth)
+    shows seams between boxes stacked flush.
     """
     n_boxes = len(tops_m)
     if n_boxes == 0:
@@ -112,15 +132,43 @@ def face_bottoms(
     low, high, ended = _line_ends(
         on[box_of, side_of, line_of], beyond[box_of, side_of, line_of], heights[box_of]
     )
+    if colour is not None:
+        rows_at, cols_at = reading.pixels
+        grey = _grey(colour[rows_at, cols_at])[box_of, side_of, line_of]
+        # The surface at the face's foot lies within the tolerance of its plane too, for a
+        # face seen steeply: it is no face, and its colour no seam.
+        face = on & (reading.seen_height > tol)
+        s_low, s_high, seam = _seams(face[box_of, side_of, line_of], grey, heights[box_of])
+    else:
+        s_low = s_high = np.zeros(len(low))
+        seam = np.zeros(len(low), dtype=bool)
+    if seam.any():
+        # A seam between two boxes runs level across the side: another line of the same side
+        # sees it within a point's spacing (an edge across the face at a slant is no seam).
+        spacing = 1.5 * heights[box_of, 0] / (SAMPLES - 1)
+        side_key = box_of * 4 + side_of
+        for j in np.flatnonzero(seam):
+            twins = seam & (side_key == side_key[j]) & (np.abs(s_high - s_high[j]) <= spacing[j])
+            seam[j] = np.count_nonzero(twins) >= 2
     px = span_px[box_of, side_of, line_of]
     # Each point is read at the pixel it falls in, whose ray meets the face up to half a
     # pixel's height away.
     half_px = 0.5 * heights[box_of, 0] / px
     result: list[Bottom | None] = []
     for i in range(n_boxes):
+        slack = float(tolerances_m[i])
         mine = np.flatnonzero(ended & (box_of == i))
         ends = [(low[j] - half_px[j], high[j] + half_px[j], px[j]) for j in mine]
-        result.append(_agreed(ends, float(tolerances_m[i])))
+        seams = np.flatnonzero(seam & (box_of == i))
+        seam_ends = [(s_low[j] - half_px[j], s_high[j] + half_px[j], px[j]) for j in seams]
+        bottom = _agreed(ends, slack)
+        # A seam above where the faces are seen to end is the higher bottom of the two.
+        by_seam = _agreed(ends + seam_ends, slack) if seam_ends else None
+        if by_seam is not None and (bottom is None or by_seam.high_m > bottom.high_m):
+            sides = sorted({int(side_of[j]) for j in seams})
+            normals = tuple((float(out[i, k, 0]), float(out[i, k, 1])) for k in sides)
+            bottom = replace(by_seam, seam=True, unseamed=bottom, seam_sides=normals)
+        result.append(bottom)
     return result
 
 
@@ -184,6 +232,60 @@ def _line_ends(
     return low, high, ended
 
 
+def _grey(colour: npt.NDArray[np.uint8]) -> Float64Array:
+    """Brightness, 0..255 (Rec. 601 luma)."""
+    rgb = np.asarray(colour, dtype=np.float64)
+    result: Float64Array = rgb @ np.array([0.299, 0.587, 0.114])
+    return result
+
+
+def _seams(
+    on: BoolArray, grey: Float64Array, heights: Float64Array
+) -> tuple[Float64Array, Float64Array, BoolArray]:
+    """Going down each line (rows): the first point where the face's points above (all of
+    them) are of one even shade and the RUN below of another, SEAM_STEP or more apart (RUN_OF
+    of RUN points on the face on either side, SEAM_GAP points between them left out); the
+    heights just below and just above it, and whether the line has one."""
+    rows, samples = on.shape
+    shade = np.where(on, grey, np.nan)
+    # A box's face above the seam as long as two runs at least (a dark rim under a top's
+    # edge is no box).
+    k = np.arange(2 * RUN, samples - RUN - SEAM_GAP + 1)
+    if rows == 0 or len(k) == 0:
+        empty = np.zeros(rows)
+        return empty, empty, np.zeros(rows, dtype=bool)
+    windows = np.lib.stride_tricks.sliding_window_view(shade, RUN, axis=1)
+    above = windows[:, k - RUN]
+    below = windows[:, k + SEAM_GAP]
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        enough = (np.sum(np.isfinite(above), axis=2) >= RUN_OF) & (
+            np.sum(np.isfinite(below), axis=2) >= RUN_OF
+        )
+        a_mid, b_mid = np.nanmedian(above, axis=2), np.nanmedian(below, axis=2)
+        # The whole face above, from just under the top's edge (whose pixels blend with the
+        # top), is one shade: a face shaded from light to dark has no seam to tell.
+        lit = shade[:, SEAM_GAP:]
+        spread = np.fmax.accumulate(lit, axis=1) - np.fmin.accumulate(lit, axis=1)
+        even = (spread[:, k - 1 - SEAM_GAP] < SEAM_STEP / 2) & (
+            np.nanmax(below, axis=2) - np.nanmin(below, axis=2) < SEAM_STEP / 2
+        )
+        is_seam = enough & even & (np.abs(a_mid - b_mid) >= SEAM_STEP)
+    seam = is_seam.any(axis=1)
+    pick = np.argmax(is_seam, axis=1)
+    first = k[pick]
+    at = np.arange(rows)
+    # The points left out between the two shades: those nearer the upper shade are above
+    # the seam.
+    gap = first[:, np.newaxis] + np.arange(SEAM_GAP)[np.newaxis, :]
+    values = shade[at[:, np.newaxis], gap]
+    upper = np.abs(values - a_mid[at, pick, np.newaxis]) < np.abs(
+        values - b_mid[at, pick, np.newaxis]
+    )
+    last = first - 1 + np.sum(np.cumprod(upper, axis=1), axis=1)
+    return heights[at, last + 1], heights[at, last], seam
+
+
 class _Reading:
     """Points down the lines of every face, looked up in the picture."""
 
@@ -204,6 +306,13 @@ class _Reading:
         self.camera_height_m = camera_height_m
         self.heights = heights
         self.out = out
+        self.pixels: tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]] = (
+            np.zeros(0, dtype=np.intp),
+            np.zeros(0, dtype=np.intp),
+        )
+        """Each point's pixel (rows, columns) at the last reading."""
+        self.seen_height: Float64Array = np.zeros(0)
+        """Each point's surface's height above the plane at the last reading."""
         # Where each line runs along its side, from the side's middle: N x 4 x L x 2.
         self.along = (
             LINES[np.newaxis, np.newaxis, :, np.newaxis]
@@ -234,6 +343,7 @@ class _Reading:
         span_px = np.hypot(u[..., 0] - u[..., -1], v[..., 0] - v[..., -1])
         ui = np.where(inside, ui, 0).astype(np.intp)
         vi = np.where(inside, vi, 0).astype(np.intp)
+        self.pixels = (vi, ui)
         d = self.depth[vi, ui]
         with np.errstate(invalid="ignore"):
             seen = inside & np.isfinite(d) & (d > 0)
@@ -241,6 +351,7 @@ class _Reading:
         seen_xyz = np.stack([across_r[ui] * d, down_r[vi] * d, d], axis=-1)
         a = seen_xyz @ e1 - edge_mid[:, :, np.newaxis, np.newaxis, 0]
         b = seen_xyz @ e2 - edge_mid[:, :, np.newaxis, np.newaxis, 1]
+        self.seen_height = seen_xyz @ normal + self.camera_height_m
         out = self.out[:, :, np.newaxis, np.newaxis, :]
         offset: Float64Array = a * out[..., 0] + b * out[..., 1]
         return offset, seen, span_px
