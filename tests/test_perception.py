@@ -336,13 +336,15 @@ def test_box_over_a_box_it_hides_measured_from_its_faces(distance_m, tilt_deg):
 
 
 @pytest.mark.parametrize(("distance_m", "tilt_deg"), [(0.9, 25.0), (1.2, 15.0)])
-def test_box_flush_on_a_box_of_nearly_its_footprint_measured_from_the_seam(distance_m, tilt_deg):
-    """A box on one 3 mm wider each way, turned 6 degrees from it: the faces run down in one
-    plane to the table (depth cannot tell where one box ends), but the colour changes where
-    they meet, level across each face. With colour it is measured from there; from depth alone
-    it is one box from the table."""
-    lower = box_on(Plane(), 0.04, 0.02, (0.066, 0.026, 0.07), 20.0, colour=(60, 90, 190))
-    upper = box_on(lower, 0.0, 0.0, (0.06, 0.02, 0.13), 6.0, colour=(190, 150, 100))
+@pytest.mark.parametrize("turn_deg", [0.0, 6.0])
+def test_box_flush_on_a_box_of_its_footprint_measured_from_the_seam(distance_m, tilt_deg, turn_deg):
+    """A box on one of the same footprint, squarely or turned 6 degrees on it: the faces run
+    down to the table in one plane (depth cannot tell where one box ends), but the colour
+    changes where they meet, level across each face. With colour it is measured from there;
+    from depth alone it is one box from the table."""
+    lower = box_on(Plane(), 0.04, 0.02, (0.06, 0.02, 0.07), 20.0, colour=(60, 90, 190))
+    # box_on turns a box on a box from the world's axes, not the lower box's.
+    upper = box_on(lower, 0.0, 0.0, (0.06, 0.02, 0.13), 20.0 + turn_deg, colour=(190, 150, 100))
     camera = Camera.tilted(distance_m, tilt_deg, width=640, height=480)
     depth, colour = render(Scene(camera, Plane(), (lower, upper)))
     found = find_boxes(depth, camera.lens, camera.camera_to_world, colour)

@@ -1469,13 +1469,17 @@ def _raise_to_faces(
 SEAM_REACH_M = 0.015
 """A top at a colour seam's height that reaches out past a box's rectangle by more than this
 stands beside the box; a box under it, flush, shows at most a rim round its outline."""
+BESIDE_MIN_M2 = 0.0008
+"""... if that much of it is seen (a rim is less)."""
 
 
 def _beside(lower: _Plateau, upper: _Plateau, sides: tuple[tuple[float, float], ...]) -> bool:
     """Whether the lower top stands beside the upper box past one of ``sides`` (outward
-    normals): its rectangle reaches out past that side by more than SEAM_REACH_M and it
-    touches the box."""
-    if lower.rect is None or upper.rect is None or not _touch(lower, upper):
+    normals): a box's top (not a rim or a strip of one) whose rectangle reaches out past that
+    side by more than SEAM_REACH_M, touching the box."""
+    if lower.visible_m2 < BESIDE_MIN_M2 or lower.rect is None or upper.rect is None:
+        return False
+    if not _touch(lower, upper):
         return False
     rel = lower.rect.corners - np.asarray(upper.rect.middle)
     return any(

@@ -30,7 +30,6 @@ beside the box that meets the face there).
 from __future__ import annotations
 
 import itertools
-import warnings
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -248,6 +247,7 @@ def _seams(
     heights just below and just above it, and whether the line has one."""
     rows, samples = on.shape
     shade = np.where(on, grey, np.nan)
+    # Means by running sums, spreads by fmax/fmin (no warnings on windows with no point).
     # A box's face above the seam as long as two runs at least (a dark rim under a top's
     # edge is no box).
     k = np.arange(2 * RUN, samples - RUN - SEAM_GAP + 1)
@@ -255,23 +255,30 @@ def _seams(
         empty = np.zeros(rows)
         return empty, empty, np.zeros(rows, dtype=bool)
     windows = np.lib.stride_tricks.sliding_window_view(shade, RUN, axis=1)
-    above = windows[:, k - RUN]
-    below = windows[:, k + SEAM_GAP]
-    with np.errstate(invalid="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        enough = (np.sum(np.isfinite(above), axis=2) >= RUN_OF) & (
-            np.sum(np.isfinite(below), axis=2) >= RUN_OF
+    zero = np.zeros((rows, 1))
+    c_valid = np.concatenate([zero, np.cumsum(on, axis=1)], axis=1)
+    c_shade = np.concatenate([zero, np.cumsum(np.where(on, grey, 0.0), axis=1)], axis=1)
+
+    def window(start: npt.NDArray[np.intp]) -> tuple[Float64Array, Float64Array, Float64Array]:
+        """Per row and start: points on the face, their mean shade, and their spread."""
+        n = c_valid[:, start + RUN] - c_valid[:, start]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = (c_shade[:, start + RUN] - c_shade[:, start]) / n
+        span = np.fmax.reduce(windows[:, start], axis=2) - np.fmin.reduce(windows[:, start], axis=2)
+        return n, mean, span
+
+    n_above, a_mid, _ = window(k - RUN)
+    n_below, b_mid, b_span = window(k + SEAM_GAP)
+    # The whole face above, from just under the top's edge (whose pixels blend with the top),
+    # is one shade: a face shaded from light to dark has no seam to tell.
+    lit = shade[:, SEAM_GAP:]
+    spread = np.fmax.accumulate(lit, axis=1) - np.fmin.accumulate(lit, axis=1)
+    with np.errstate(invalid="ignore"):
+        even = (spread[:, k - 1 - SEAM_GAP] < SEAM_STEP / 2) & (b_span < SEAM_STEP / 2)
+        is_seam = (
+            (n_above >= RUN_OF) & (n_below >= RUN_OF) & even & (np.abs(a_mid - b_mid) >= SEAM_STEP)
         )
-        a_mid, b_mid = np.nanmedian(above, axis=2), np.nanmedian(below, axis=2)
-        # The whole face above, from just under the top's edge (whose pixels blend with the
-        # top), is one shade: a face shaded from light to dark has no seam to tell.
-        lit = shade[:, SEAM_GAP:]
-        spread = np.fmax.accumulate(lit, axis=1) - np.fmin.accumulate(lit, axis=1)
-        even = (spread[:, k - 1 - SEAM_GAP] < SEAM_STEP / 2) & (
-            np.nanmax(below, axis=2) - np.nanmin(below, axis=2) < SEAM_STEP / 2
-        )
-        is_seam = enough & even & (np.abs(a_mid - b_mid) >= SEAM_STEP)
-    seam = is_seam.any(axis=1)
+    seam: BoolArray = np.any(is_seam, axis=1)
     pick = np.argmax(is_seam, axis=1)
     first = k[pick]
     at = np.arange(rows)
