@@ -1475,8 +1475,8 @@ BESIDE_MIN_M2 = 0.0008
 
 def _beside(lower: _Plateau, upper: _Plateau, sides: tuple[tuple[float, float], ...]) -> bool:
     """Whether the lower top stands beside the upper box past one of ``sides`` (outward
-    normals): a box's top (not a rim or a strip of one) whose rectangle reaches out past that
-    side by more than SEAM_REACH_M, touching the box."""
+    normals): a top with BESIDE_MIN_M2 or more of it seen (not the rim of a box under it),
+    touching the box, whose rectangle reaches out past that side by more than SEAM_REACH_M."""
     if lower.visible_m2 < BESIDE_MIN_M2 or lower.rect is None or upper.rect is None:
         return False
     if not _touch(lower, upper):
