@@ -259,16 +259,17 @@ def _seams(
     c_valid = np.concatenate([zero, np.cumsum(on, axis=1)], axis=1)
     c_shade = np.concatenate([zero, np.cumsum(np.where(on, grey, 0.0), axis=1)], axis=1)
 
-    def window(start: npt.NDArray[np.intp]) -> tuple[Float64Array, Float64Array, Float64Array]:
-        """Per row and start: points on the face, their mean shade, and their spread."""
+    def window(start: npt.NDArray[np.intp]) -> tuple[Float64Array, Float64Array]:
+        """Per row and start: points on the face and their mean shade."""
         n = c_valid[:, start + RUN] - c_valid[:, start]
         with np.errstate(invalid="ignore", divide="ignore"):
             mean = (c_shade[:, start + RUN] - c_shade[:, start]) / n
-        span = np.fmax.reduce(windows[:, start], axis=2) - np.fmin.reduce(windows[:, start], axis=2)
-        return n, mean, span
+        return n, mean
 
-    n_above, a_mid, _ = window(k - RUN)
-    n_below, b_mid, b_span = window(k + SEAM_GAP)
+    n_above, a_mid = window(k - RUN)
+    n_below, b_mid = window(k + SEAM_GAP)
+    below = windows[:, k + SEAM_GAP]
+    b_span = np.fmax.reduce(below, axis=2) - np.fmin.reduce(below, axis=2)
     # The whole face above, from just under the top's edge (whose pixels blend with the top),
     # is one shade: a face shaded from light to dark has no seam to tell.
     lit = shade[:, SEAM_GAP:]
