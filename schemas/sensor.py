@@ -25,7 +25,8 @@ class Image(Message, frozen=True, kw_only=True):
 class CameraInfo(Message, frozen=True, kw_only=True):
     """The lens: K = [fx 0 cx; 0 fy cy; 0 0 1] in pixels, row-major.
 
-    Pixels are measured from their top-left corner, so cx of a 320-wide picture is 160.
+    As real cameras' drivers, OpenCV and depth_image_proc write it: the middle of pixel u is
+    at u, so cx of a centred 320-wide lens is 159.5.
     """
 
     header: Header = Header()
