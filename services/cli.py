@@ -29,6 +29,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "replay": ("services.replay", "publish an .mcap recording back onto its keys (ros2 bag play)"),
     "info": ("services.info", "summarise an .mcap recording (ros2 bag info)"),
     "export": ("services.export", "write an .mcap recording for ROS 2 or Foxglove tools"),
+    "import": ("services.import_bag", "turn a real camera's ROS bag into a onebox recording"),
     "pixels": ("services.pixels", "print every pixel of the basic camera (make camera.pixels)"),
     "check": ("services.check", "list what is being published (make camera.check)"),
     "echo": ("services.echo", "print every message on a key, readable (ros2 topic echo)"),

@@ -1,0 +1,377 @@
+"""A real camera's ROS bag as a onebox recording, so ``onebox replay`` drives the locator with it.
+
+:func:`import_bag` reads a ROS 2 bag (an ``.mcap`` or ``.db3`` file, or the folder ``ros2 bag
+record`` makes) or a ROS 1 ``.bag`` with the ``rosbags`` library, and writes a onebox MCAP
+recording (zstd) of:
+
+  the depth picture    sensor_msgs/Image 16UC1, 32FC1 or mono16  ->  camera/depth/image_raw
+  its lens             sensor_msgs/CameraInfo beside it           ->  camera/camera_info
+  the colour picture   sensor_msgs/Image rgb8, bgr8, rgba8, bgra8 ->  camera/image_raw
+  the fixed frames     tf2_msgs/TFMessage on .../tf_static        ->  tf_static (all of them)
+
+Which topic is which is read from the pictures' encodings; a bag with several depth topics
+(a RealSense's depth/image_rect_raw and aligned_depth_to_color/image_raw) takes the one the
+colour picture is aligned with (the same size), and ``depth``/``colour``/``info`` name topics
+outright. The lens is the CameraInfo in the depth topic's own folder
+(``.../aligned_depth_to_color/camera_info``). A colour picture of another size than the depth
+(not aligned to it) is left out: the locator then reads depth alone. Stamps are the bag's
+header stamps (sec, nanosec) in nanoseconds; frames keep their names, so the locator reports
+in the camera's optical frame unless a ``world_frame`` it is given is on tf_static
+(``ONEBOX_WORLD_FRAME=base_link``). Real cameras stamp depth and colour apart: run the locator
+with ``--slop-ms`` (half the frame period) to pair them.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from onebox import keys
+from onebox.errors import RecordingError
+from onebox.recording import RecordingWriter
+from onebox.sync import ReportLimiter
+from schemas import (
+    CameraInfo,
+    Header,
+    Image,
+    Message,
+    Quaternion,
+    TFMessage,
+    Transform,
+    TransformStamped,
+    Vector3,
+    codec,
+)
+
+log = logging.getLogger("import")
+
+IMAGE = "sensor_msgs/msg/Image"
+CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
+TF = "tf2_msgs/msg/TFMessage"
+DEPTH_ENCODINGS = {"16UC1": "16UC1", "mono16": "16UC1", "32FC1": "32FC1"}
+"""A depth picture's encodings, and what onebox calls each (mono16 is 16UC1's other name)."""
+COLOUR_ENCODINGS = ("rgb8", "bgr8", "rgba8", "bgra8")
+
+
+class BagError(RecordingError):
+    """A bag could not be imported; the message says why and what to do."""
+
+
+@dataclass(frozen=True)
+class Picture:
+    """An image topic, as its first message shows it."""
+
+    topic: str
+    encoding: str
+    width: int
+    height: int
+
+
+@dataclass(frozen=True)
+class Choice:
+    """The topics taken, and the image topics seen."""
+
+    depth: Picture
+    info: str
+    colour: Picture | None
+    tf_static: tuple[str, ...]
+    pictures: tuple[Picture, ...]
+    colour_left_out: str = ""
+    """Why no colour picture is taken, when there is a colour topic."""
+
+
+@dataclass
+class ImportResult:
+    """What an import wrote and what it left out."""
+
+    choice: Choice
+    written: Counter[str] = field(default_factory=Counter)
+    """Messages written, by onebox key."""
+    left_out: Counter[str] = field(default_factory=Counter)
+    """Messages of the bag not imported, by topic."""
+    bad: Counter[str] = field(default_factory=Counter)
+    """Messages that did not decode or convert, by topic."""
+    distorted: bool = False
+    """The depth lens has distortion coefficients, which onebox does not undo."""
+
+
+def _folder(topic: str) -> str:
+    return topic.rsplit("/", 1)[0]
+
+
+def _stamp_ns(header: Any) -> int:
+    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+
+
+def _header(header: Any) -> Header:
+    return Header(stamp_ns=_stamp_ns(header), frame_id=str(header.frame_id))
+
+
+def _pictures(reader: Any) -> list[Picture]:
+    pictures = []
+    for connection in reader.connections:
+        if connection.msgtype != IMAGE:
+            continue
+        for _, _, raw in reader.messages(connections=[connection]):
+            msg = reader.deserialize(raw, connection.msgtype)
+            pictures.append(
+                Picture(connection.topic, str(msg.encoding), int(msg.width), int(msg.height))
+            )
+            break
+    return pictures
+
+
+def choose(
+    reader: Any, depth: str | None = None, colour: str | None = None, info: str | None = None
+) -> Choice:
+    """Which of the bag's topics are the depth picture, its lens and the colour picture."""
+    pictures = _pictures(reader)
+    listed = ", ".join(f"{p.topic} ({p.encoding}, {p.width} x {p.height})" for p in pictures)
+    by_topic = {p.topic: p for p in pictures}
+    depths = [p for p in pictures if p.encoding in DEPTH_ENCODINGS]
+    colours = [p for p in pictures if p.encoding in COLOUR_ENCODINGS]
+    if colour is not None and colour not in by_topic:
+        raise BagError(f"--colour {colour}: no such image topic in the bag (its images: {listed})")
+    if colour is not None and by_topic[colour].encoding not in COLOUR_ENCODINGS:
+        raise BagError(
+            f"--colour {colour} is {by_topic[colour].encoding}, not a colour picture "
+            f"({', '.join(COLOUR_ENCODINGS)})"
+        )
+    if depth is not None:
+        if depth not in by_topic:
+            raise BagError(
+                f"--depth {depth}: no such image topic in the bag (its images: {listed})"
+            )
+        chosen = by_topic[depth]
+        if chosen.encoding not in DEPTH_ENCODINGS:
+            raise BagError(
+                f"--depth {depth} is {chosen.encoding}, not a depth picture "
+                f"({', '.join(DEPTH_ENCODINGS)})"
+            )
+    elif not depths:
+        raise BagError(
+            "the bag holds no depth picture (sensor_msgs/Image in 16UC1, mono16 or 32FC1); "
+            f"its images: {listed or 'none'}"
+        )
+    else:
+        wanted = [by_topic[colour]] if colour is not None else colours
+        aligned = [
+            d for d in depths if any((c.width, c.height) == (d.width, d.height) for c in wanted)
+        ]
+        pool = aligned or depths
+        if len(pool) > 1:
+            named = [d for d in pool if "aligned" in d.topic]
+            pool = named or pool
+        if len(pool) > 1:
+            raise BagError(
+                "the bag holds several depth pictures: name one with --depth "
+                f"({', '.join(d.topic for d in pool)})"
+            )
+        chosen = pool[0]
+    infos = [c.topic for c in reader.connections if c.msgtype == CAMERA_INFO]
+    if info is not None:
+        if info not in infos:
+            raise BagError(
+                f"--info {info}: no such CameraInfo topic in the bag "
+                f"(its CameraInfo topics: {', '.join(infos) or 'none'})"
+            )
+        lens = info
+    else:
+        beside = [t for t in infos if _folder(t) == _folder(chosen.topic)]
+        if not beside:
+            raise BagError(
+                f"no CameraInfo beside {chosen.topic} (in {_folder(chosen.topic)}/): name the "
+                f"depth picture's lens with --info (the bag's: {', '.join(infos) or 'none'})"
+            )
+        lens = beside[0]
+    picked: Picture | None = None
+    why = ""
+    candidates = [by_topic[colour]] if colour is not None else colours
+    same = [c for c in candidates if (c.width, c.height) == (chosen.width, chosen.height)]
+    if same:
+        named = [c for c in same if "color" in c.topic or "colour" in c.topic]
+        picked = (named or same)[0]
+    elif candidates:
+        c = candidates[0]
+        why = (
+            f"{c.topic} is {c.width} x {c.height} but the depth is {chosen.width} x "
+            f"{chosen.height}: not aligned, so the locator reads depth alone (record the "
+            "depth aligned to colour, e.g. a RealSense's aligned_depth_to_color)"
+        )
+    tf_static = tuple(
+        c.topic for c in reader.connections if c.msgtype == TF and c.topic.endswith("tf_static")
+    )
+    return Choice(chosen, lens, picked, tf_static, tuple(pictures), why)
+
+
+def _image(msg: Any, encoding: str) -> Image:
+    return Image(
+        header=_header(msg.header),
+        height=int(msg.height),
+        width=int(msg.width),
+        encoding=encoding,
+        is_bigendian=int(msg.is_bigendian),
+        step=int(msg.step),
+        data=msg.data.tobytes(),
+    )
+
+
+def _numbers(msg: Any, name: str) -> list[float]:
+    """A CameraInfo array: ``d`` in ROS 2, ``D`` in ROS 1."""
+    values = getattr(msg, name) if hasattr(msg, name) else getattr(msg, name.upper())
+    return [float(v) for v in values]
+
+
+def _camera_info(msg: Any) -> CameraInfo:
+    return CameraInfo(
+        header=_header(msg.header),
+        height=int(msg.height),
+        width=int(msg.width),
+        distortion_model=str(msg.distortion_model),
+        d=_numbers(msg, "d"),
+        k=_numbers(msg, "k"),
+        r=_numbers(msg, "r"),
+        p=_numbers(msg, "p"),
+    )
+
+
+def _transform(t: Any) -> TransformStamped:
+    v, q = t.transform.translation, t.transform.rotation
+    return TransformStamped(
+        header=_header(t.header),
+        child_frame_id=str(t.child_frame_id),
+        transform=Transform(
+            translation=Vector3(x=float(v.x), y=float(v.y), z=float(v.z)),
+            rotation=Quaternion(x=float(q.x), y=float(q.y), z=float(q.z), w=float(q.w)),
+        ),
+    )
+
+
+def _convert(msg: Any, key: str, statics: dict[str, TransformStamped]) -> Message | None:
+    """The onebox message for a bag's message bound for ``key`` (None: not one to import)."""
+    if key == keys.CAMERA.depth:
+        encoding = DEPTH_ENCODINGS.get(str(msg.encoding))
+        return None if encoding is None else _image(msg, encoding)
+    if key == keys.CAMERA.colour:
+        return _image(msg, str(msg.encoding))
+    if key == keys.CAMERA.info:
+        return _camera_info(msg)
+    # Each tf_static publisher latches its own; onebox keeps them all in one message.
+    for t in msg.transforms:
+        statics[str(t.child_frame_id)] = _transform(t)
+    return TFMessage(transforms=list(statics.values()))
+
+
+def _partial_path(destination: Path) -> Path:
+    return destination.with_name(f".{destination.name}.{os.getpid()}.partial")
+
+
+def _open(source: Path) -> Any:
+    from rosbags.highlevel import AnyReader, AnyReaderError
+    from rosbags.typesys import Stores, get_typestore
+
+    try:
+        reader = AnyReader([source], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+        reader.open()
+    except (AnyReaderError, OSError, ValueError, KeyError) as e:
+        raise BagError(
+            f"{source}: not a ROS bag onebox can read ({e}); give a ROS 2 bag (.mcap or .db3 "
+            "file, or its folder) or a ROS 1 .bag"
+        ) from e
+    return reader
+
+
+def import_bag(
+    source: Path,
+    destination: Path,
+    *,
+    depth: str | None = None,
+    colour: str | None = None,
+    info: str | None = None,
+    overwrite: bool = False,
+    progress: Callable[[int, int], None] | None = None,
+) -> ImportResult:
+    """Write the camera topics of the bag ``source`` into the onebox recording ``destination``.
+
+    ``progress(done, total)`` is called every few hundred messages. Raises BagError with a line
+    that says what to do; nothing is left at ``destination`` then.
+    """
+    if not source.exists():
+        raise BagError(f"{source} does not exist: give the path of a ROS bag")
+    if destination.exists() and destination.resolve() == source.resolve():
+        raise BagError(f"{destination} is the input: choose another name for the output")
+    if destination.exists() and not overwrite:
+        raise BagError(
+            f"{destination} already exists: delete it, choose another name, or pass --overwrite"
+        )
+    if destination.is_dir():
+        raise BagError(f"{destination} is a folder: give a file name ending in .mcap")
+    reader = _open(source)
+    partial = _partial_path(destination)
+    try:
+        with contextlib.closing(reader):
+            choice = choose(reader, depth, colour, info)
+            try:
+                writer = RecordingWriter(partial, compression="zstd")
+            except OSError as e:
+                raise BagError(f"cannot create {destination}: {e.strerror}") from e
+            with writer:
+                result = _copy(reader, choice, writer, progress)
+        os.replace(partial, destination)
+    except BaseException as e:
+        with contextlib.suppress(FileNotFoundError):
+            partial.unlink()
+        if isinstance(e, OSError):
+            raise BagError(f"cannot write {destination}: {e.strerror or e}") from e
+        raise
+    return result
+
+
+def _copy(
+    reader: Any,
+    choice: Choice,
+    writer: RecordingWriter,
+    progress: Callable[[int, int], None] | None,
+) -> ImportResult:
+    result = ImportResult(choice)
+    routes: dict[str, str] = {choice.depth.topic: keys.CAMERA.depth, choice.info: keys.CAMERA.info}
+    if choice.colour is not None:
+        routes[choice.colour.topic] = keys.CAMERA.colour
+    for topic in choice.tf_static:
+        routes[topic] = keys.TF_STATIC
+    statics: dict[str, TransformStamped] = {}
+    total = sum(c.msgcount for c in reader.connections)
+    wanted = [c for c in reader.connections if c.topic in routes]
+    for c in reader.connections:
+        if c.topic not in routes:
+            result.left_out[c.topic] += c.msgcount
+    limiter = ReportLimiter(log)
+    done = 0
+    for connection, log_time_ns, raw in reader.messages(connections=wanted):
+        done += 1
+        if progress is not None and done % 200 == 0:
+            progress(done, total)
+        key = routes[connection.topic]
+        try:
+            message = _convert(reader.deserialize(raw, connection.msgtype), key, statics)
+        except Exception as e:  # a damaged message of any kind: reported by topic, left out
+            result.bad[connection.topic] += 1
+            limiter.warn(connection.topic, "bad", f"left out: {type(e).__name__}: {e}")
+            continue
+        if message is None:
+            result.left_out[connection.topic] += 1
+            continue
+        if isinstance(message, CameraInfo):
+            result.distorted |= any(abs(v) > 1e-9 for v in message.d)
+        payload = codec(type(message)).encode(message)
+        writer.add(key, payload, log_time_ns)
+        result.written[key] += 1
+    if progress is not None:
+        progress(done, total)
+    return result

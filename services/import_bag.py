@@ -1,0 +1,94 @@
+"""Import a real camera's ROS bag as a onebox recording, for ``onebox replay`` and the locator.
+
+  onebox import realsense.mcap run.mcap                   a ROS 2 bag (.mcap, .db3 or folder)
+  onebox import d435.bag run.mcap --depth /camera/aligned_depth_to_color/image_raw
+  onebox replay run.mcap                                   then, beside `honcho start`
+
+Reads a ROS 2 bag (rosbag2 MCAP or SQLite, the file or the folder ``ros2 bag record`` makes) or
+a ROS 1 .bag. Writes a onebox recording (zstd) of the depth picture (sensor_msgs/Image 16UC1,
+mono16 or 32FC1) on camera/depth/image_raw, its lens (the CameraInfo in the depth topic's
+folder) on camera/camera_info, the colour picture on camera/image_raw when it is aligned with
+the depth (the same size), and every tf_static transform on tf_static. Which topic is which
+comes from the pictures' encodings; ``--depth``, ``--colour`` and ``--info`` name topics
+outright (a bag with several depth pictures needs ``--depth`` unless one is aligned to the
+colour). Stamps are the bag's header stamps.
+
+A real camera stamps depth and colour apart: run the locator with ``--slop-ms`` (about half the
+frame period, ONEBOX_SLOP_MS) so that they pair. The locator reports in the camera's optical
+frame unless its world frame is on tf_static (ONEBOX_WORLD_FRAME=base_link). Refuses to
+overwrite OUT without --overwrite, and never leaves a partial OUT behind.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import time
+from pathlib import Path
+
+from onebox import ros_bag
+
+log = logging.getLogger("import")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("source", type=Path, metavar="BAG", help="a ROS 2 or ROS 1 bag")
+    parser.add_argument("destination", type=Path, metavar="OUT.mcap", help="the file to write")
+    parser.add_argument("--depth", metavar="TOPIC", help="the depth picture's topic")
+    parser.add_argument("--colour", metavar="TOPIC", help="the colour picture's topic")
+    parser.add_argument("--info", metavar="TOPIC", help="the depth picture's CameraInfo topic")
+    parser.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
+
+
+class Progress:
+    """Prints ``import: 1200 of 5000 messages (24 %)`` at most every ``interval_s``."""
+
+    def __init__(self, interval_s: float = 2.0) -> None:
+        self._interval_s = interval_s
+        self._last = time.monotonic()
+
+    def __call__(self, done: int, total: int) -> None:
+        now = time.monotonic()
+        if now - self._last < self._interval_s:
+            return
+        self._last = now
+        share = f" ({100 * done / total:.0f} %)" if total else ""
+        print(f"import: {done} of {total} messages{share}", flush=True)
+
+
+def main(args: argparse.Namespace) -> int:
+    result = ros_bag.import_bag(
+        args.source,
+        args.destination,
+        depth=args.depth,
+        colour=args.colour,
+        info=args.info,
+        overwrite=args.overwrite,
+        progress=Progress(),
+    )
+    choice = result.choice
+    d = choice.depth
+    print(f"  depth   {d.topic} ({d.encoding}, {d.width} x {d.height})")
+    print(f"  lens    {choice.info}")
+    if choice.colour is not None:
+        print(f"  colour  {choice.colour.topic} ({choice.colour.encoding})")
+    elif choice.colour_left_out:
+        print(f"  colour  left out: {choice.colour_left_out}")
+    if choice.tf_static:
+        print(f"  frames  {', '.join(choice.tf_static)}")
+    for key, count in sorted(result.written.items()):
+        print(f"  {key:<24} {count:>6} messages")
+    if result.left_out:
+        listed = ", ".join(f"{t} ({n})" for t, n in sorted(result.left_out.items()))
+        print(f"  left out: {listed}")
+    if result.bad:
+        listed = ", ".join(f"{t} ({n})" for t, n in sorted(result.bad.items()))
+        print(f"  left out, damaged: {listed}")
+    if result.distorted:
+        log.warning(
+            "the depth lens %s has distortion coefficients; onebox reads pictures as rectified "
+            "(record the rectified depth, e.g. image_rect_raw)",
+            choice.info,
+        )
+    print(f"import: wrote {args.destination}: {sum(result.written.values())} messages")
+    return 0
