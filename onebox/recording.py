@@ -711,3 +711,35 @@ class ByteBudgetQueue:
     def __len__(self) -> int:
         with self._ready:
             return len(self._items)
+
+
+@contextlib.contextmanager
+def written_whole(destination: Path) -> Iterator[Path]:
+    """A hidden file beside ``destination`` to write: renamed onto it when the block ends,
+    removed when the block raises, so a failure never leaves a partial file under the name
+    asked for."""
+    partial = destination.with_name(f".{destination.name}.{os.getpid()}.partial")
+    try:
+        yield partial
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            partial.unlink()
+        raise
+    os.replace(partial, destination)
+
+
+class Progress:
+    """Prints ``VERB: 1200 of 5000 messages (24 %)`` at most every ``interval_s``."""
+
+    def __init__(self, verb: str, interval_s: float = 2.0) -> None:
+        self._verb = verb
+        self._interval_s = interval_s
+        self._last = time.monotonic()
+
+    def __call__(self, done: int, total: int) -> None:
+        now = time.monotonic()
+        if now - self._last < self._interval_s:
+            return
+        self._last = now
+        share = f" ({100 * done / total:.0f} %)" if total else ""
+        print(f"{self._verb}: {done} of {total} messages{share}", flush=True)

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import os
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -34,7 +33,7 @@ from typing import Any
 
 from onebox import keys
 from onebox.errors import RecordingError
-from onebox.recording import RecordingWriter
+from onebox.recording import RecordingWriter, written_whole
 from onebox.sync import ReportLimiter
 from schemas import (
     CameraInfo,
@@ -268,10 +267,6 @@ def _convert(msg: Any, key: str, statics: dict[str, TransformStamped]) -> Messag
     return TFMessage(transforms=list(statics.values()))
 
 
-def _partial_path(destination: Path) -> Path:
-    return destination.with_name(f".{destination.name}.{os.getpid()}.partial")
-
-
 def _open(source: Path) -> Any:
     from rosbags.highlevel import AnyReader, AnyReaderError
     from rosbags.typesys import Stores, get_typestore
@@ -313,9 +308,8 @@ def import_bag(
     if destination.is_dir():
         raise BagError(f"{destination} is a folder: give a file name ending in .mcap")
     reader = _open(source)
-    partial = _partial_path(destination)
     try:
-        with contextlib.closing(reader):
+        with contextlib.closing(reader), written_whole(destination) as partial:
             choice = choose(reader, depth, colour, info)
             try:
                 writer = RecordingWriter(partial, compression="zstd")
@@ -323,13 +317,8 @@ def import_bag(
                 raise BagError(f"cannot create {destination}: {e.strerror}") from e
             with writer:
                 result = _copy(reader, choice, writer, progress)
-        os.replace(partial, destination)
-    except BaseException as e:
-        with contextlib.suppress(FileNotFoundError):
-            partial.unlink()
-        if isinstance(e, OSError):
-            raise BagError(f"cannot write {destination}: {e.strerror or e}") from e
-        raise
+    except OSError as e:
+        raise BagError(f"cannot write {destination}: {e.strerror or e}") from e
     return result
 
 

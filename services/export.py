@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from onebox import export, settings
+from onebox.recording import Progress
 
 log = logging.getLogger("export")
 
@@ -69,7 +70,7 @@ def main(args: argparse.Namespace) -> int:
         namespace=s.namespace,
         overwrite=s.overwrite,
         recover=s.recover,
-        progress=export.Progress(),
+        progress=Progress("export"),
     )
     for topic, count in sorted(result.topics.items()):
         print(f"  {topic:<28} {count:>6} messages")

@@ -23,10 +23,10 @@ from __future__ import annotations
 
 import argparse
 import logging
-import time
 from pathlib import Path
 
 from onebox import ros_bag
+from onebox.recording import Progress
 
 log = logging.getLogger("import")
 
@@ -40,22 +40,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
 
 
-class Progress:
-    """Prints ``import: 1200 of 5000 messages (24 %)`` at most every ``interval_s``."""
-
-    def __init__(self, interval_s: float = 2.0) -> None:
-        self._interval_s = interval_s
-        self._last = time.monotonic()
-
-    def __call__(self, done: int, total: int) -> None:
-        now = time.monotonic()
-        if now - self._last < self._interval_s:
-            return
-        self._last = now
-        share = f" ({100 * done / total:.0f} %)" if total else ""
-        print(f"import: {done} of {total} messages{share}", flush=True)
-
-
 def main(args: argparse.Namespace) -> int:
     result = ros_bag.import_bag(
         args.source,
@@ -64,7 +48,7 @@ def main(args: argparse.Namespace) -> int:
         colour=args.colour,
         info=args.info,
         overwrite=args.overwrite,
-        progress=Progress(),
+        progress=Progress("import"),
     )
     choice = result.choice
     d = choice.depth

@@ -17,7 +17,7 @@ from mcap_ros2.decoder import DecoderFactory as Ros2Decoders
 from rerun.chunk import RrdReader
 
 from onebox import export
-from onebox.recording import RecordingWriter
+from onebox.recording import Progress, RecordingWriter
 from onebox.rerun_sink import rerun_executable
 from onebox.testing.fake_capture import BOX_CENTRE, BOX_SIZE, capture, tf_static
 from onebox.testing.processes import CAPTURE, ROOT
@@ -294,7 +294,7 @@ def test_progress_is_reported_on_long_files(source, tmp_path, capsys):
     seen: list[tuple[int, int]] = []
     export.export(source, tmp_path / "p.mcap", "ros2", progress=lambda d, t: seen.append((d, t)))
     assert seen[-1] == (seen[-1][1], seen[-1][1]) and seen[-1][1] == 1 + 2 * 8 + 2
-    printer = export.Progress(interval_s=0.0)
+    printer = Progress("export", interval_s=0.0)
     printer(100, 400)
     assert capsys.readouterr().out == "export: 100 of 400 messages (25 %)\n"
 

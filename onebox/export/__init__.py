@@ -17,10 +17,7 @@ the target cannot hold, is reported with its key and left out; so are keys with 
 
 from __future__ import annotations
 
-import contextlib
 import logging
-import os
-import time
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -92,10 +89,6 @@ def _open_target(to: str, path: Path) -> Target:
     raise ExportError(f"unknown format {to!r}: choose one of {', '.join(FORMATS)}")
 
 
-def _partial_path(destination: Path) -> Path:
-    return destination.with_name(f".{destination.name}.{os.getpid()}.partial")
-
-
 def export(
     source: Path,
     destination: Path,
@@ -126,23 +119,18 @@ def export(
         raise ExportError(f"{destination} is a folder: give a file name ending in .mcap")
     # Read the summary first: a file that is not MCAP fails here, before anything is created.
     total = recording.describe(source, recover=recover).message_count
-    partial = _partial_path(destination)
     try:
-        target = _open_target(to, partial)
+        with recording.written_whole(destination) as partial:
+            try:
+                target = _open_target(to, partial)
+            except OSError as e:
+                raise ExportError(f"cannot create {destination}: {e.strerror}") from e
+            try:
+                result = _copy(source, target, namespace, recover, total, progress)
+            finally:
+                target.close()
     except OSError as e:
-        raise ExportError(f"cannot create {destination}: {e.strerror}") from e
-    try:
-        try:
-            result = _copy(source, target, namespace, recover, total, progress)
-        finally:
-            target.close()
-        os.replace(partial, destination)
-    except BaseException as e:
-        with contextlib.suppress(FileNotFoundError):
-            partial.unlink()
-        if isinstance(e, OSError):
-            raise ExportError(f"cannot write {destination}: {e.strerror or e}") from e
-        raise
+        raise ExportError(f"cannot write {destination}: {e.strerror or e}") from e
     return result
 
 
@@ -185,19 +173,3 @@ def _copy(
     if progress is not None:
         progress(done, total)
     return result
-
-
-class Progress:
-    """Prints ``export: 1200 of 5000 messages (24 %)`` at most every ``interval_s``."""
-
-    def __init__(self, interval_s: float = 2.0) -> None:
-        self._interval_s = interval_s
-        self._last = time.monotonic()
-
-    def __call__(self, done: int, total: int) -> None:
-        now = time.monotonic()
-        if now - self._last < self._interval_s:
-            return
-        self._last = now
-        share = f" ({100 * done / total:.0f} %)" if total else ""
-        print(f"export: {done} of {total} messages{share}", flush=True)
