@@ -713,6 +713,18 @@ class ByteBudgetQueue:
             return len(self._items)
 
 
+def output_problem(source: Path, destination: Path, *, overwrite: bool) -> str | None:
+    """Why ``destination`` may not be written from ``source`` (a line that says what to do),
+    or None when it may."""
+    if destination.exists() and destination.resolve() == source.resolve():
+        return f"{destination} is the input: choose another name for the output"
+    if destination.exists() and not overwrite:
+        return f"{destination} already exists: delete it, choose another name, or pass --overwrite"
+    if destination.is_dir():
+        return f"{destination} is a folder: give a file name ending in .mcap"
+    return None
+
+
 @contextlib.contextmanager
 def written_whole(destination: Path) -> Iterator[Path]:
     """A hidden file beside ``destination`` to write: renamed onto it when the block ends,

@@ -33,7 +33,7 @@ from typing import Any
 
 from onebox import keys
 from onebox.errors import RecordingError
-from onebox.recording import RecordingWriter, written_whole
+from onebox.recording import RecordingWriter, output_problem, written_whole
 from onebox.sync import ReportLimiter
 from schemas import (
     CameraInfo,
@@ -299,14 +299,9 @@ def import_bag(
     """
     if not source.exists():
         raise BagError(f"{source} does not exist: give the path of a ROS bag")
-    if destination.exists() and destination.resolve() == source.resolve():
-        raise BagError(f"{destination} is the input: choose another name for the output")
-    if destination.exists() and not overwrite:
-        raise BagError(
-            f"{destination} already exists: delete it, choose another name, or pass --overwrite"
-        )
-    if destination.is_dir():
-        raise BagError(f"{destination} is a folder: give a file name ending in .mcap")
+    problem = output_problem(source, destination, overwrite=overwrite)
+    if problem is not None:
+        raise BagError(problem)
     reader = _open(source)
     try:
         with contextlib.closing(reader), written_whole(destination) as partial:

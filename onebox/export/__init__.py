@@ -109,14 +109,9 @@ def export(
         raise ExportError(f"unknown format {to!r}: choose one of {', '.join(FORMATS)}")
     if not source.exists():
         raise ExportError(f"{source} does not exist: give the path of a onebox .mcap recording")
-    if destination.exists() and destination.resolve() == source.resolve():
-        raise ExportError(f"{destination} is the input: choose another name for the output")
-    if destination.exists() and not overwrite:
-        raise ExportError(
-            f"{destination} already exists: delete it, choose another name, or pass --overwrite"
-        )
-    if destination.is_dir():
-        raise ExportError(f"{destination} is a folder: give a file name ending in .mcap")
+    problem = recording.output_problem(source, destination, overwrite=overwrite)
+    if problem is not None:
+        raise ExportError(problem)
     # Read the summary first: a file that is not MCAP fails here, before anything is created.
     total = recording.describe(source, recover=recover).message_count
     try:
