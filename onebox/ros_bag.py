@@ -97,7 +97,7 @@ class ImportResult:
     bad: Counter[str] = field(default_factory=Counter)
     """Messages that did not decode or convert, by topic."""
     distorted: bool = False
-    """The depth lens has distortion coefficients, which onebox does not undo."""
+    """The depth lens has distortion coefficients (kept: the locator rectifies as it reads)."""
 
 
 def _folder(topic: str) -> str:

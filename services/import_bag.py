@@ -69,9 +69,9 @@ def main(args: argparse.Namespace) -> int:
         listed = ", ".join(f"{t} ({n})" for t, n in sorted(result.bad.items()))
         print(f"  left out, damaged: {listed}")
     if result.distorted:
-        log.warning(
-            "the depth lens %s has distortion coefficients; onebox reads pictures as rectified "
-            "(record the rectified depth, e.g. image_rect_raw)",
+        log.info(
+            "the depth lens %s has distortion coefficients: the locator and points rectify "
+            "each picture as they read it",
             choice.info,
         )
     print(f"import: wrote {args.destination}: {sum(result.written.values())} messages")

@@ -5,7 +5,8 @@ Reads (keys under --namespace):
                           reading); stamped in the camera's optical frame
   camera/camera_info      CameraInfo (the middle of pixel u at u, as real cameras write it),
                           matched to each depth picture by header.stamp_ns (exactly, or within
-                          --slop-ms for a real camera)
+                          --slop-ms for a real camera); a lens with distortion (plumb_bob,
+                          rational_polynomial, equidistant) has its pictures rectified first
   camera/image_raw        Image, colour aligned with the depth pixel for pixel (optional): its
                           edges split touching cartons whose seam depth alone cannot see
   tf_static               TFMessage, latched: any chain of transforms from world_frame to the
@@ -56,6 +57,7 @@ from onebox.errors import SettingError
 from onebox.geometry import FrameError, FrameTree, matrix_of
 from onebox.perception import seed
 from onebox.perception.boxes import Box, BoxFinder, FinderSettings, Found
+from onebox.rectify import Rectifier, lens_of
 from onebox.sync import StampClock, Stamped, StampMatcher
 from schemas import (
     BoundingBox3D,
@@ -282,6 +284,9 @@ class Lens:
     width: int
     height: int
     intrinsics: geometry.Intrinsics
+    """The pinhole the maths measures with (P's when the camera's lens distorts)."""
+    rectifier: Rectifier | None = None
+    """Remaps a distorted camera's pictures onto ``intrinsics`` first."""
 
 
 @dataclass(frozen=True)
@@ -455,6 +460,7 @@ class Locator:
         self._camera_cache: tuple[int, str, geometry.Float64Array] | None = None
         self._camera_chain: tuple[str, geometry.Float64Array | None] | None = None
         """The camera's frame and world_frame <- it as last used, to say when tf_static moves it."""
+        self._said_rectified = False
         self._finder = BoxFinder(config.finder())
         self._started_s = time.monotonic()
         self._detections = b.publisher(keys.DETECTIONS, Detection3DArray)
@@ -502,10 +508,22 @@ class Locator:
 
     def _on_info(self, key: str, info: CameraInfo) -> None:
         try:
-            lens = Lens(info.width, info.height, geometry.Intrinsics.from_k(info.k))
+            lens = Lens(info.width, info.height, *lens_of(info))
         except ValueError as e:
             self._report.warn(key, "lens", f"dropped: {e}")
             return
+        if lens.rectifier is not None and not self._said_rectified:
+            self._said_rectified = True
+            log.info(
+                "%s: the lens has %s distortion; its pictures are rectified (nearest pixel) "
+                "onto fx %.1f, fy %.1f, cx %.1f, cy %.1f before they are measured",
+                key,
+                info.distortion_model,
+                lens.intrinsics.fx,
+                lens.intrinsics.fy,
+                lens.intrinsics.cx,
+                lens.intrinsics.cy,
+            )
         if self._stamp_ok(key, info.header.stamp_ns):
             self._offer("info", info.header.stamp_ns, lens)
 
@@ -645,11 +663,12 @@ class Locator:
             return
         frame_id = self._world_frame if camera_to_world is not None else frame.frame_id
         started = time.perf_counter()
+        depth_m = frame.depth_m if lens.rectifier is None else lens.rectifier.depth(frame.depth_m)
         if self._config.method == "seed":
             assert camera_to_world is not None  # LocatorSettings refuses seed without a pose
             table_z = self._config.table_z_m or 0.0
             box = seed.locate_box(
-                frame.depth_m, lens.intrinsics, camera_to_world, table_z, self._config.min_height_m
+                depth_m, lens.intrinsics, camera_to_world, table_z, self._config.min_height_m
             )
             self._count(started)
             self._detections.publish(
@@ -658,7 +677,9 @@ class Locator:
             result = Result(frame.stamp_ns, seed_box=box, frame=frame_id)
         else:
             colour = self._colour_for(frame)
-            found_boxes = self._finder(frame.depth_m, lens.intrinsics, camera_to_world, colour)
+            if colour is not None and lens.rectifier is not None:
+                colour = lens.rectifier.colour(colour)
+            found_boxes = self._finder(depth_m, lens.intrinsics, camera_to_world, colour)
             self._count(started)
             self._detections.publish(detection_array(found_boxes, frame.stamp_ns, frame_id))
             support = support_message(found_boxes, frame.stamp_ns, frame_id)

@@ -4,16 +4,16 @@ Reads (keys under --namespace), matched by header.stamp_ns (exactly, or within -
   camera/depth/image_raw  Image, 32FC1 metres (NaN = no reading) or 16UC1 millimetres (0 = no
                           reading)
   camera/image_raw        Image, rgb8 (also bgr8, rgba8, bgra8, mono8), the same size
-  camera/camera_info      CameraInfo: the lens (fx, fy, cx, cy from K)
+  camera/camera_info      CameraInfo: the lens (fx, fy, cx, cy from K); a lens with
+                          distortion has its pictures rectified onto P's pinhole first
 Writes:
   camera/points           PointCloud in the depth picture's frame (camera_optical_frame), one
                           point a pixel with a reading: x, y, z float32 metres and rgb uint32
                           0x00RRGGBB, 16 bytes a point; pixels with no reading are skipped, so
                           the cloud is dense. One cloud a capture, stamped like the capture.
 
-Pixel middles are at u + 0.5, v + 0.5 (the seed's half pixel; depth_image_proc itself leaves
-it out and is 0.6 mm off at the box). A message it cannot use is logged with its key once per
-interval and dropped.
+The middle of pixel u is at u, as CameraInfo and depth_image_proc have it. A message it cannot
+use is logged with its key once per interval and dropped.
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ import numpy.typing as npt
 
 from onebox import bus, geometry, pictures, sync
 from onebox.errors import SettingError
+from onebox.rectify import lens_of
 from onebox.sync import StampClock, Stamped, StampMatcher
 from schemas import FLOAT32, UINT32, CameraInfo, Header, Image, PointCloud, PointField
 
@@ -153,11 +154,11 @@ class Points:
 
     def _on_info(self, key: str, info: CameraInfo) -> None:
         try:
-            lens = geometry.Intrinsics.from_k(info.k)
+            lens, rectifier = lens_of(info)
         except ValueError as e:
             self._report.warn(key, "lens", f"dropped: {e}")
             return
-        self._offer(key, "info", info.header.stamp_ns, (info.width, info.height, lens))
+        self._offer(key, "info", info.header.stamp_ns, (info.width, info.height, lens, rectifier))
 
     def _unmatched(self, stamped: Stamped, why: str) -> None:
         self._report.warn(
@@ -170,7 +171,7 @@ class Points:
     def process(self, found: dict[str, Stamped]) -> None:
         header, depth_m = found["depth"].item
         rgb = found["colour"].item
-        width, height, lens = found["info"].item
+        width, height, lens, rectifier = found["info"].item
         if depth_m.shape != (height, width) or rgb.shape[:2] != depth_m.shape:
             self._report.warn(
                 self._bus.key(DEPTH_KEY),
@@ -179,6 +180,8 @@ class Points:
                 f"{rgb.shape[0]} and camera info {width} x {height} differ; dropped",
             )
             return
+        if rectifier is not None:
+            depth_m, rgb = rectifier.depth(depth_m), rectifier.colour(rgb)
         self._publisher.publish(point_cloud(depth_m, lens, rgb, header))
         self.published += 1
 

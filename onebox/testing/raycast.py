@@ -11,6 +11,7 @@ axis, float32, NaN where a ray hits nothing. The world frame is Z up.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -20,6 +21,7 @@ import numpy.typing as npt
 from scipy import ndimage
 
 from onebox.geometry import Intrinsics
+from onebox.rectify import distort
 
 Float32Array = npt.NDArray[np.float32]
 Float64Array = npt.NDArray[np.float64]
@@ -50,12 +52,21 @@ def frame_from_normal(normal: Sequence[float] | Float64Array, yaw_deg: float = 0
 
 @dataclass(frozen=True)
 class Camera:
-    """A pinhole camera: picture size, lens and its pose (optical frame into the world)."""
+    """A camera: picture size, lens and its pose (optical frame into the world).
+
+    A pinhole, unless ``distortion`` (a CameraInfo's model and coefficients) bends its rays as
+    a real lens does: then its pictures are what a camera publishing ``image_raw`` sends.
+    """
 
     width: int
     height: int
     lens: Intrinsics
     camera_to_world: Float64Array
+    distortion: tuple[str, tuple[float, ...]] | None = None
+
+    def distorted(self, model: str, coefficients: Sequence[float]) -> Camera:
+        """This camera with a lens that distorts."""
+        return dataclasses.replace(self, distortion=(model, tuple(coefficients)))
 
     @classmethod
     def looking_at(
@@ -215,6 +226,30 @@ class Scene:
         return [s for s in self.shapes if isinstance(s, Box)]
 
 
+def undistort(
+    model: str, d: Sequence[float], xd: Float64Array, yd: Float64Array
+) -> tuple[Float64Array, Float64Array]:
+    """The pinhole point a lens distorts to (xd, yd): the inverse of :func:`rectify.distort`,
+    by Newton's method on it (numerical Jacobian), to 1e-12."""
+    x, y = xd.copy(), yd.copy()
+    h = 1e-7
+    for _ in range(50):
+        fx, fy = distort(model, d, x, y)
+        ex, ey = fx - xd, fy - yd
+        if max(float(np.abs(ex).max()), float(np.abs(ey).max())) < 1e-12:
+            break
+        ax, ay = distort(model, d, x + h, y)
+        bx, by = distort(model, d, x, y + h)
+        j11, j21 = (ax - fx) / h, (ay - fy) / h
+        j12, j22 = (bx - fx) / h, (by - fy) / h
+        det = j11 * j22 - j12 * j21
+        x = x - (j22 * ex - j12 * ey) / det
+        y = y - (j11 * ey - j21 * ex) / det
+    else:
+        raise ValueError(f"{model} {list(d)} cannot be undone over this picture")
+    return x, y
+
+
 def _world_rays(camera: Camera) -> tuple[Float64Array, Float64Array]:
     """Camera position (3,) and, per pixel, the world direction whose optical z is 1 (H, W, 3)."""
     across, down = camera.lens.rays(camera.width, camera.height)
@@ -222,6 +257,9 @@ def _world_rays(camera: Camera) -> tuple[Float64Array, Float64Array]:
     optical[..., 0] = across[np.newaxis, :]
     optical[..., 1] = down[:, np.newaxis]
     optical[..., 2] = 1.0
+    if camera.distortion is not None:
+        model, d = camera.distortion
+        optical[..., 0], optical[..., 1] = undistort(model, d, optical[..., 0], optical[..., 1])
     rot = camera.camera_to_world[:3, :3]
     world: Float64Array = optical @ rot.T
     origin: Float64Array = camera.camera_to_world[:3, 3].copy()
