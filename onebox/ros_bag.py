@@ -9,6 +9,12 @@ recording (zstd) of:
   the colour picture   sensor_msgs/Image rgb8, bgr8, rgba8, bgra8 ->  camera/image_raw
   the fixed frames     tf2_msgs/TFMessage on .../tf_static        ->  tf_static (all of them)
 
+Bags recorded to save space often hold only ``image_transport``'s compressed topics; those are
+read too: ``.../compressedDepth`` (sensor_msgs/CompressedImage, a 12-byte header and a PNG:
+16UC1 millimetres as they are, 32FC1 as quantised inverse depth) becomes 16UC1 or 32FC1, and
+``.../compressed`` (JPEG or PNG) becomes rgb8. When a bag has a stream both raw and compressed,
+the raw one is taken. ``rvl`` compressed depth is not read (the error says so).
+
 Which topic is which is read from the pictures' encodings; a bag with several depth topics
 (a RealSense's depth/image_rect_raw and aligned_depth_to_color/image_raw) takes the one the
 colour picture is aligned with (the same size), and ``depth``/``colour``/``info`` name topics
@@ -24,12 +30,16 @@ with ``--slop-ms`` (half the frame period) to pair them.
 from __future__ import annotations
 
 import contextlib
+import io
 import logging
+import struct
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from onebox import keys
 from onebox.errors import RecordingError
@@ -51,6 +61,10 @@ from schemas import (
 log = logging.getLogger("import")
 
 IMAGE = "sensor_msgs/msg/Image"
+COMPRESSED = "sensor_msgs/msg/CompressedImage"
+TRANSPORTS = ("/compressedDepth", "/compressed")
+"""image_transport's topics beside a raw picture's: the compressed picture of ``.../image_raw``
+is on ``.../image_raw/compressed`` (colour) or ``.../image_raw/compressedDepth`` (depth)."""
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 TF = "tf2_msgs/msg/TFMessage"
 DEPTH_ENCODINGS = {"16UC1": "16UC1", "mono16": "16UC1", "32FC1": "32FC1"}
@@ -68,8 +82,25 @@ class Picture:
 
     topic: str
     encoding: str
+    """What onebox writes it as (a compressed picture: what it decodes to)."""
     width: int
     height: int
+    compressed: str = ""
+    """A CompressedImage's format ("16UC1; compressedDepth png", "rgb8; jpeg compressed bgr8");
+    empty for a raw picture."""
+
+    @property
+    def described(self) -> str:
+        how = f", from {self.compressed}" if self.compressed else ""
+        return f"{self.encoding}{how}, {self.width} x {self.height}"
+
+    @property
+    def stream(self) -> str:
+        """The raw picture's topic this is (itself, or the topic its transport hangs off)."""
+        for suffix in TRANSPORTS:
+            if self.compressed and self.topic.endswith(suffix):
+                return self.topic[: -len(suffix)]
+        return self.topic
 
 
 @dataclass(frozen=True)
@@ -113,15 +144,25 @@ def _header(header: Any) -> Header:
 
 
 def _pictures(reader: Any) -> list[Picture]:
+    """Every image topic as its first message shows it."""
     pictures = []
     for connection in reader.connections:
-        if connection.msgtype != IMAGE:
+        if connection.msgtype not in (IMAGE, COMPRESSED):
             continue
         for _, _, raw in reader.messages(connections=[connection]):
             msg = reader.deserialize(raw, connection.msgtype)
-            pictures.append(
-                Picture(connection.topic, str(msg.encoding), int(msg.width), int(msg.height))
-            )
+            if connection.msgtype == IMAGE:
+                encoding, width, height = str(msg.encoding), int(msg.width), int(msg.height)
+                compressed = ""
+            else:
+                compressed = str(msg.format)
+                try:
+                    image = _decompressed(msg)
+                except ValueError as e:
+                    log.warning("%s: left out: %s", connection.topic, e)
+                    break
+                encoding, width, height = image.encoding, image.width, image.height
+            pictures.append(Picture(connection.topic, encoding, width, height, compressed))
             break
     return pictures
 
@@ -131,10 +172,13 @@ def choose(
 ) -> Choice:
     """Which of the bag's topics are the depth picture, its lens and the colour picture."""
     pictures = _pictures(reader)
-    listed = ", ".join(f"{p.topic} ({p.encoding}, {p.width} x {p.height})" for p in pictures)
+    listed = ", ".join(f"{p.topic} ({p.described})" for p in pictures)
     by_topic = {p.topic: p for p in pictures}
-    depths = [p for p in pictures if p.encoding in DEPTH_ENCODINGS]
-    colours = [p for p in pictures if p.encoding in COLOUR_ENCODINGS]
+    # A stream recorded both raw and compressed is taken raw unless named.
+    raw_streams = {p.topic for p in pictures if not p.compressed}
+    streams = [p for p in pictures if not p.compressed or p.stream not in raw_streams]
+    depths = [p for p in streams if p.encoding in DEPTH_ENCODINGS]
+    colours = [p for p in streams if p.encoding in COLOUR_ENCODINGS]
     if colour is not None and colour not in by_topic:
         raise BagError(f"--colour {colour}: no such image topic in the bag (its images: {listed})")
     if colour is not None and by_topic[colour].encoding not in COLOUR_ENCODINGS:
@@ -182,11 +226,12 @@ def choose(
             )
         lens = info
     else:
-        beside = [t for t in infos if _folder(t) == _folder(chosen.topic)]
+        folder = _folder(chosen.stream)
+        beside = [t for t in infos if _folder(t) == folder]
         if not beside:
             raise BagError(
-                f"no CameraInfo beside {chosen.topic} (in {_folder(chosen.topic)}/): name the "
-                f"depth picture's lens with --info (the bag's: {', '.join(infos) or 'none'})"
+                f"no CameraInfo beside {chosen.topic} (in {folder}/): name the depth "
+                f"picture's lens with --info (the bag's: {', '.join(infos) or 'none'})"
             )
         lens = beside[0]
     picked: Picture | None = None
@@ -219,6 +264,55 @@ def _image(msg: Any, encoding: str) -> Image:
         step=int(msg.step),
         data=msg.data.tobytes(),
     )
+
+
+def _decompressed(msg: Any) -> Image:
+    """A sensor_msgs/CompressedImage as the raw Image it was: compressedDepth's PNG as 16UC1
+    (or 32FC1 from its quantised inverse depth), a JPEG or PNG colour picture as rgb8. Raises
+    ValueError for what it cannot read."""
+    import PIL.Image
+
+    fmt = str(msg.format)
+    data = msg.data.tobytes() if hasattr(msg.data, "tobytes") else bytes(msg.data)
+    header = _header(msg.header)
+    if "compressedDepth" in fmt:
+        if "rvl" in fmt:
+            raise ValueError(f"{fmt!r}: rvl compressed depth is not read; record it as png")
+        start = data.find(b"\x89PNG")
+        if start < 0:
+            raise ValueError(f"{fmt!r} without a PNG in it")
+        try:
+            with PIL.Image.open(io.BytesIO(data[start:])) as picture:
+                values = np.asarray(picture)
+        except (OSError, SyntaxError) as e:
+            raise ValueError(f"{fmt!r}: the PNG does not decode ({e})") from e
+        if values.ndim != 2:
+            raise ValueError(f"{fmt!r}: a PNG of {values.shape}, not one channel")
+        height, width = values.shape
+        encoding = fmt.split(";")[0].strip()
+        if encoding in ("16UC1", "mono16"):
+            depth = values.astype("<u2")
+            return Image(header=header, height=height, width=width, encoding="16UC1",
+                         step=width * 2, data=depth.tobytes())  # fmt: skip
+        if encoding == "32FC1":
+            # compressed_depth_image_transport stores q = A / depth + B, 0 for no reading.
+            if start < 12:
+                raise ValueError(f"{fmt!r}: no quantisation header before the PNG")
+            a, b = struct.unpack_from("<ff", data, start - 8)
+            q = values.astype(np.float64)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                metres = np.where(q > 0, a / (q - b), np.nan).astype("<f4")
+            return Image(header=header, height=height, width=width, encoding="32FC1",
+                         step=width * 4, data=metres.tobytes())  # fmt: skip
+        raise ValueError(f"{fmt!r}: compressed depth of {encoding!r} is not read")
+    try:
+        with PIL.Image.open(io.BytesIO(data)) as picture:
+            rgb = np.asarray(picture.convert("RGB"))
+    except (OSError, SyntaxError, ValueError) as e:
+        raise ValueError(f"{fmt!r}: the picture does not decode ({e})") from e
+    height, width = rgb.shape[:2]
+    return Image(header=header, height=height, width=width, encoding="rgb8", step=width * 3,
+                 data=rgb.tobytes())  # fmt: skip
 
 
 def _numbers(msg: Any, name: str) -> list[float]:
@@ -254,6 +348,8 @@ def _transform(t: Any) -> TransformStamped:
 
 def _convert(msg: Any, key: str, statics: dict[str, TransformStamped]) -> Message | None:
     """The onebox message for a bag's message bound for ``key`` (None: not one to import)."""
+    if key in (keys.CAMERA.depth, keys.CAMERA.colour) and hasattr(msg, "format"):
+        return _decompressed(msg)
     if key == keys.CAMERA.depth:
         encoding = DEPTH_ENCODINGS.get(str(msg.encoding))
         return None if encoding is None else _image(msg, encoding)

@@ -6,12 +6,13 @@
 
 Reads a ROS 2 bag (rosbag2 MCAP or SQLite, the file or the folder ``ros2 bag record`` makes) or
 a ROS 1 .bag. Writes a onebox recording (zstd) of the depth picture (sensor_msgs/Image 16UC1,
-mono16 or 32FC1) on camera/depth/image_raw, its lens (the CameraInfo in the depth topic's
-folder) on camera/camera_info, the colour picture on camera/image_raw when it is aligned with
-the depth (the same size), and every tf_static transform on tf_static. Which topic is which
-comes from the pictures' encodings; ``--depth``, ``--colour`` and ``--info`` name topics
-outright (a bag with several depth pictures needs ``--depth`` unless one is aligned to the
-colour). Stamps are the bag's header stamps.
+mono16 or 32FC1, or image_transport's compressedDepth PNG) on camera/depth/image_raw, its lens
+(the CameraInfo in the depth topic's folder) on camera/camera_info, the colour picture (raw,
+or JPEG/PNG compressed: written as rgb8) on camera/image_raw when it is aligned with the depth
+(the same size), and every tf_static transform on tf_static. Which topic is which comes from
+the pictures' encodings; ``--depth``, ``--colour`` and ``--info`` name topics outright (a bag
+with several depth pictures needs ``--depth`` unless one is aligned to the colour). Stamps are
+the bag's header stamps.
 
 A real camera stamps depth and colour apart: run the locator with ``--slop-ms`` (about half the
 frame period, ONEBOX_SLOP_MS) so that they pair. The locator reports in the camera's optical
@@ -52,10 +53,12 @@ def main(args: argparse.Namespace) -> int:
     )
     choice = result.choice
     d = choice.depth
-    print(f"  depth   {d.topic} ({d.encoding}, {d.width} x {d.height})")
+    print(f"  depth   {d.topic} ({d.described})")
     print(f"  lens    {choice.info}")
     if choice.colour is not None:
-        print(f"  colour  {choice.colour.topic} ({choice.colour.encoding})")
+        c = choice.colour
+        how = f", from {c.compressed}" if c.compressed else ""
+        print(f"  colour  {c.topic} ({c.encoding}{how})")
     elif choice.colour_left_out:
         print(f"  colour  left out: {choice.colour_left_out}")
     if choice.tf_static:

@@ -4,7 +4,10 @@ locator, which finds the boxes in it."""
 
 from __future__ import annotations
 
+import io
 import math
+import struct
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -296,3 +299,113 @@ def test_a_ros1_bag_reads_its_capitalised_lens(tmp_path):
     assert image_out.encoding == "16UC1" and image_out.header.stamp_ns == 5_000_000_007
     assert np.array_equal(np.frombuffer(image_out.data, np.uint16).reshape(2, 3), depth)
     assert codec(CameraInfo).decode(got[keys.CAMERA.info]).k == list(k)
+
+
+def _png16(values: np.ndarray) -> bytes:
+    """A 16-bit greyscale PNG written by hand (zlib, no filter), as OpenCV writes the PNG of
+    compressed_depth_image_transport: not by the library that reads it."""
+    height, width = values.shape
+    rows = b"".join(b"\x00" + values[r].astype(">u2").tobytes() for r in range(height))
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        crc = struct.pack(">I", zlib.crc32(kind + body))
+        return struct.pack(">I", len(body)) + kind + body + crc
+
+    head = struct.pack(">IIBBBBB", width, height, 16, 0, 0, 0, 0)
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", head)
+        + chunk(b"IDAT", zlib.compress(rows))
+        + chunk(b"IEND", b"")
+    )
+
+
+def _compressed(stamp_ns: int, frame: str, fmt: str, data: bytes) -> dict:
+    return {"header": _header(stamp_ns, frame), "format": fmt, "data": data}
+
+
+def test_a_bag_of_compressed_pictures_comes_in_as_the_raw_pictures(tmp_path):
+    """Bags recorded to save space hold image_transport's topics: compressedDepth (a 12-byte
+    header and a 16-bit PNG; 32FC1 as quantised inverse depth) and compressed (JPEG). They come
+    in as 16UC1 / 32FC1 / rgb8, the lens found beside the raw topic they hang off."""
+    import PIL.Image
+
+    camera = Camera.tilted(0.7, 20.0, width=160, height=120)
+    depth_m, colour = render(Scene(camera, Plane(), BOXES))
+    depth_mm = np.where(np.isfinite(depth_m), np.rint(depth_m * 1000), 0).astype(np.uint16)
+    # compressed_depth_image_transport's 32FC1: q = A / depth + B, A = Q (Q + 1), B = 1 - A / max.
+    a = 100.0 * 101.0
+    b = 1.0 - a / 10.0
+    inverse = np.where(np.isfinite(depth_m), np.rint(a / depth_m + b), 0).astype(np.uint16)
+    jpeg = io.BytesIO()
+    PIL.Image.fromarray(colour).save(jpeg, format="JPEG", quality=95)
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    path = tmp_path / "compressed.mcap"
+    depth_topic = f"{ALIGNED}/image_raw/compressedDepth"
+    with path.open("wb") as f:
+        writer = Ros2Writer(f)
+        schemas = {
+            name: writer.register_msgdef(name, store.generate_msgdef(name, ros_version=2)[0])
+            for name in ("sensor_msgs/msg/CompressedImage", "sensor_msgs/msg/CameraInfo")
+        }
+        compressed, info = (
+            schemas["sensor_msgs/msg/CompressedImage"],
+            schemas["sensor_msgs/msg/CameraInfo"],
+        )
+        t = 1_700_000_000_000_000_000
+        for topic, schema, message in (
+            (
+                depth_topic,
+                compressed,
+                _compressed(t, "optical", "16UC1; compressedDepth png",
+                            struct.pack("<iff", 0, 0.0, 0.0) + _png16(depth_mm)),
+            ),
+            (
+                f"{ROS}/depth/image_rect_raw/compressedDepth",
+                compressed,
+                _compressed(t, "depth", "32FC1; compressedDepth png",
+                            struct.pack("<iff", 0, a, b) + _png16(inverse[::2, ::2])),
+            ),
+            (f"{ALIGNED}/camera_info", info, _info(t, "optical", camera.lens, 160, 120)),
+            (
+                f"{ROS}/color/image_raw/compressed",
+                compressed,
+                _compressed(t, "optical", "rgb8; jpeg compressed bgr8", jpeg.getvalue()),
+            ),
+        ):  # fmt: skip
+            writer.write_message(topic, schema, message, t, t)
+        writer.finish()
+    out = tmp_path / "run.mcap"
+    done = run_onebox("import", str(path), str(out))
+    assert done.returncode == 0, done.stderr
+    assert f"depth   {depth_topic} (16UC1, from 16UC1; compressedDepth png, 160 x 120)" in (
+        done.stdout
+    )
+    assert f"lens    {ALIGNED}/camera_info" in done.stdout
+    got = {item.key: bytes(item.payload) for item in iter_messages(out)}
+    depth = codec(Image).decode(got[keys.CAMERA.depth])
+    assert np.array_equal(np.frombuffer(depth.data, np.uint16).reshape(120, 160), depth_mm)
+    rgb = codec(Image).decode(got[keys.CAMERA.colour])
+    assert rgb.encoding == "rgb8"
+    pixels = np.frombuffer(rgb.data, np.uint8).reshape(120, 160, 3).astype(int)
+    assert np.abs(pixels - colour).mean() < 3, "JPEG at quality 95 stays close"
+
+    other = tmp_path / "other.mcap"
+    done = run_onebox(
+        "import",
+        str(path),
+        str(other),
+        "--depth",
+        f"{ROS}/depth/image_rect_raw/compressedDepth",
+        "--info",
+        f"{ALIGNED}/camera_info",
+    )
+    assert done.returncode == 0, done.stderr
+    image = codec(Image).decode(next(i.payload for i in iter_messages(other)
+                                     if i.key == keys.CAMERA.depth))  # fmt: skip
+    assert image.encoding == "32FC1" and (image.width, image.height) == (80, 60)
+    metres = np.frombuffer(image.data, np.float32).reshape(60, 80)
+    truth = depth_m[::2, ::2]
+    seen = np.isfinite(truth)
+    assert np.array_equal(np.isfinite(metres), seen)
+    assert np.abs(metres[seen] - truth[seen]).max() < 0.0001, "within the quantisation"
