@@ -27,9 +27,10 @@ How a picture is read (whole-array work; Python loops only over tops, a few scal
    pixel, what lies past it: rising (hidden by something standing on or in front of the top),
    dropping (a real edge) or no reading (dropout). Every rectangle is fitted in one batched
    pass (:func:`onebox.perception.rectangle.fit_rectangles`).
-5. Not a box: a top touching the picture's border (cut off), smaller than ``min_top_area_m2``,
-   not parallel to the support, not flat, filling less than ``min_score`` of its rectangle
-   (a disc fills pi/4; under noise of 3 mm or more, a top seen whole by its hull), or curved:
+5. Not a box: a top touching the picture's border (cut off), smaller than ``min_top_area_m2``
+   (or (3 sigma)^2 where the depth is noisy), seen narrower than 1 cm, not parallel to the
+   support, not flat, filling less than ``min_score`` of its rectangle (a disc fills pi/4;
+   under noise of 3 mm or more, a top seen whole by its hull), or curved:
    loosening the height tolerance four-fold widens a curved top (cylinder, ball) but not a
    box's, whose sides drop straight down.
 6. What each box stands on. Lines of probe points go out from each side at the height of each
@@ -88,6 +89,12 @@ BAND_M = 0.005
 """A piece between colour edges narrower than about twice this is a band (a seam's line),
 not a top: the tops beside it at its height grow across it and meet in its middle."""
 BAND_MAX_PX = 6
+MIN_WIDTH_M = 0.01
+"""A top seen narrower than this is a sliver (the strip of a box showing past a taller one's
+foot, a line of flying pixels), not a box: its rectangle says nothing of a box's size."""
+NOISY_TOP_AREA_M2 = 0.0009
+"""Where depth is noisy (sigma 1 cm and more: a D435 past 1.5 m), a top must be 3 x 3 cm: a
+smaller one's plane is a noise clump's, and taken as a box's base it cut tall boxes short."""
 """The widest band, in pixels on either side of its middle line."""
 HIDDEN_BAND_M = 0.01
 """A box whose hidden side is hidden by something standing off it by more than this (and
@@ -113,8 +120,9 @@ class FinderSettings:
     """World (or optical-frame) x, y, z limits of a box's top middle; nothing reported outside."""
     max_height_m: float | None = None
     """A ceiling above the surface; anything higher is ignored."""
-    min_top_area_m2: float = 0.0009
-    """Tops smaller than this (3 x 3 cm) are dropped: speckles, clumps, flying pixels."""
+    min_top_area_m2: float = 0.0004
+    """Tops smaller than this (2 x 2 cm) are dropped: speckles, clumps, flying pixels; where the
+    depth is noisy, smaller than (3 sigma)^2 too, up to ``NOISY_TOP_AREA_M2``."""
     min_score: float = 0.85
     """A top must fill this share of its rectangle (a disc fills 0.785)."""
     max_top_tilt_deg: float = 8.0
@@ -261,8 +269,24 @@ def find_boxes(
     _bases(boxes, plateaus, height_m, labels_top, lens, support, settings)
     _raise_to_faces(boxes, plateaus, depth, colour, lens, support, settings)
     _shadowed_sides(boxes, support.offset_camera_m, settings)
-    reported = [b for b in boxes if not b.platform and not _extent_unknown(b)]
+    reported = [
+        b
+        for b in boxes
+        if not b.platform
+        and not _extent_unknown(b)
+        and b.rect is not None
+        and b.rect.width_m >= MIN_WIDTH_M
+    ]
     return Found(support, _report(reported, support, basis, camera_to_world, settings), frame)
+
+
+def _least_top_area(sigma_m: npt.ArrayLike, settings: FinderSettings) -> Float64Array:
+    """The smallest top kept where the noise is ``sigma_m``: ``min_top_area_m2`` where depth is
+    clean, (3 sigma)^2 where that is more, up to ``NOISY_TOP_AREA_M2``."""
+    low = settings.min_top_area_m2
+    noisy = (3.0 * np.asarray(sigma_m, dtype=np.float64)) ** 2
+    result: Float64Array = np.clip(noisy, low, max(low, NOISY_TOP_AREA_M2))
+    return result
 
 
 def _stride(shape: tuple[int, ...], max_pixels: int | None) -> int:
@@ -346,7 +370,7 @@ def _plateaus(
     areas[0] = 0.0
     # Pieces too small to be a top (a carton's rim cut off by a colour edge, a clump, the cut
     # pixels themselves) may be taken over by the top beside them at the same height.
-    least = 0.5 * settings.min_top_area_m2
+    least = 0.5 * float(_least_top_area(support.sigma_m, settings))
     big = np.flatnonzero(areas >= least)
     if len(big) == 0:
         return [], height, labels_top
@@ -724,7 +748,9 @@ def _measure_all(
     cut_off = np.bincount(top[border], minlength=count) > 0
     filled = np.minimum(tops.row_fill, tops.col_fill)
     whole_area = area + np.maximum(filled - tops.counts, 0) * mean_area
-    eligible = (tops.counts >= 6) & (whole_area >= settings.min_top_area_m2)
+    mean_depth = np.bincount(top, weights=d, minlength=count) / n
+    sigma = np.asarray(support.sigma_at(mean_depth), dtype=np.float64)
+    eligible = (tops.counts >= 6) & (whole_area >= _least_top_area(sigma, settings))
     if not settings.keep_cut_off:
         eligible &= ~cut_off
     footprint = np.sqrt(mean_area)
@@ -741,8 +767,6 @@ def _measure_all(
     )
     # A rim of a lower top a few pixels wide is told from noise only while the noise is well
     # under a footprint (3 sigma within two): a close camera, a clean picture.
-    mean_depth = np.bincount(top, weights=d, minlength=count) / n
-    sigma = np.asarray(support.sigma_at(mean_depth), dtype=np.float64)
     # Only for the tops that may be boxes, and while the noise lets a rim be told.
     rim = eligible & (3.0 * sigma <= 2.0 * footprint)
     at_rim = rim[e_top]
