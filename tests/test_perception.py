@@ -479,3 +479,31 @@ def test_a_small_box_is_found_where_the_depth_is_clean():
             assert math.dist(box.centre, true.centre) < 0.002
             assert box.size[0] == pytest.approx(max(true.size[:2]), abs=0.002)
             assert box.size[1] == pytest.approx(min(true.size[:2]), abs=0.002)
+
+
+@pytest.mark.parametrize("lid_m", [0.008, -0.008], ids=["bulging", "sagging"])
+@pytest.mark.parametrize("sigma_m", [0.0, 0.001])
+def test_cartons_whose_lids_bulge_or_sag_are_boxes(lid_m, sigma_m):
+    """Real cartons' lids are not flat: overfilled they bulge, soft they sag, by several
+    millimetres, smoothly. Seen from 0.7 m through clean depth each is still one box (the
+    finder before lost one in three), its outline near the rim's (within 7 mm: a bulging lid's
+    rim may fall under the top's level), its height between the rim and the lid's middle."""
+    cartons = tuple(
+        dataclasses.replace(box_on(Plane(), x, y, size, yaw, colour), lid_m=lid_m)
+        for x, y, size, yaw, colour in (
+            (0.0, 0.0, (0.30, 0.20, 0.15), 20.0, (170, 130, 90)),
+            (0.22, 0.15, (0.20, 0.15, 0.10), -15.0, (160, 125, 85)),
+            (-0.2, 0.18, (0.12, 0.10, 0.08), 5.0, (175, 135, 95)),
+        )
+    )
+    camera = Camera.tilted(0.7, 20.0, width=640, height=480, hfov_deg=70)
+    depth, colour = render(Scene(camera, Plane(), cartons))
+    noisy = add_noise(depth, Noise(sigma_m=sigma_m), np.random.default_rng(2))
+    found = find_boxes(noisy, camera.lens, camera.camera_to_world, colour)
+    assert len(found.boxes) == len(cartons)
+    for box, true in match(found.boxes, cartons):
+        assert math.dist(box.top_middle[:2], true.top_middle[:2]) < 0.003
+        assert box.size[0] == pytest.approx(max(true.size[:2]), abs=0.007)
+        assert box.size[1] == pytest.approx(min(true.size[:2]), abs=0.007)
+        rim, crest = true.size[2], true.size[2] + lid_m
+        assert min(rim, crest) - 0.002 <= box.size[2] <= max(rim, crest) + 0.002

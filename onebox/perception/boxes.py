@@ -19,9 +19,11 @@ How a picture is read (whole-array work; Python loops only over tops, a few scal
 3. Standing pixels split into pieces at height steps and colour edges
    (:mod:`onebox.perception.segment`). Every piece's top height at once: the fullest window of
    a per-piece height histogram (window = the tolerance, 3 sigma(z), at least 1.5 mm), then the
-   mean of the readings within the tolerance. Tops grow back into cut pixels and small pieces
-   at their height (3 pixels, the larger top first), and across bands (a seam's line cut out
-   by colour edges on both sides, under ~1 cm wide) until they meet in the band's middle.
+   mean of the readings within the tolerance. The top is the readings within 4 mm of that
+   (``FLAT_REACH_M``, or the tolerance if more: a carton's lid bulges or sags). Tops grow back
+   into cut pixels and small pieces at their height (3 pixels, the larger top first), and
+   across bands (a seam's line cut out by colour edges on both sides, under ~1 cm wide) until
+   they meet in the band's middle.
 4. All tops measured together from their grouped pixels: area (holes filled by each row's and
    column's span), the top's plane (moments on a sample), the outline and, for each outline
    pixel, what lies past it: rising (hidden by something standing on or in front of the top),
@@ -83,6 +85,10 @@ Vec3 = tuple[float, float, float]
 
 TOP_TOLERANCE_FLOOR_M = 0.0015
 """The least height tolerance of a top: a renderer's depth is good to a few tenths of a mm."""
+FLAT_REACH_M = 0.004
+"""How far from its level a reading still belongs to a top (at least the tolerance): a real
+carton's lid bulges or sags by several millimetres, smoothly (steps between neighbours still
+split objects), and the top is all of it; its level is still measured within the tolerance."""
 GROW_PX = 3
 """How far a top grows back into cut pixels and fragments: a colour edge cuts ~2 pixels."""
 BAND_M = 0.005
@@ -388,7 +394,8 @@ def _plateaus(
         3.0 * np.maximum(noise_k * mean_d * mean_d, SIGMA_FLOOR_M), TOP_TOLERANCE_FLOOR_M
     )
     level = _levels(p_h, p_top, tops_n, tol)
-    on_level = np.abs(p_h - level[p_top]) < tol[p_top]
+    reach = np.maximum(tol, FLAT_REACH_M)
+    on_level = np.abs(p_h - level[p_top]) < reach[p_top]
     top_lab = np.zeros(h.shape, dtype=np.int32)
     top_flat = top_lab.reshape(-1)
     small = np.zeros(count + 1, dtype=bool)
@@ -401,7 +408,11 @@ def _plateaus(
     in_band = band[p_top]
     seated = on_level & ~in_band
     top_flat[p_idx[seated]] = p_top[seated] + 1
-    _grow(top_flat, candidates, h_flat, level, tol, width_p, p_idx[in_band])
+    # Cut pixels just under a top are its side faces' first pixels: in clean depth the top
+    # grows into none of them (its outline would widen by a pixel); under noise they cannot be
+    # told from a lid's rim dipping under the level, and the lid wins.
+    below = np.where(tol > TOP_TOLERANCE_FLOOR_M, reach, tol)
+    _grow(top_flat, candidates, h_flat, level, below, width_p, p_idx[in_band], reach)
     if band.any():
         # A band no top at its height reaches is an object of its own (a narrow box).
         taken = np.bincount(p_top[in_band], weights=top_flat[p_idx[in_band]] > 0, minlength=tops_n)
@@ -535,10 +546,12 @@ def _grow(
     tol: Float64Array,
     width: int,
     bands: npt.NDArray[np.intp] | None = None,
+    above: Float64Array | None = None,
 ) -> None:
-    """Tops grow back into cut pixels and small pieces at their height, GROW_PX pixels, and
-    on across ``bands`` (a seam's line between colour edges) until they meet; where two tops
-    reach one pixel the larger (lower index) takes it, so a band splits down its middle."""
+    """Tops grow back into cut pixels and small pieces at their height (from ``tol`` under
+    their level to ``above`` over it, ``tol`` when None), GROW_PX pixels, and on across
+    ``bands`` (a seam's line between colour edges) until they meet; where two tops reach one
+    pixel the larger (lower index) takes it, so a band splits down its middle."""
     reach = GROW_PX
     if bands is not None and len(bands):
         candidates = np.concatenate([candidates, bands])
@@ -558,7 +571,8 @@ def _grow(
             np.minimum(best, np.where(seen > 0, seen, none), out=best)
         take = np.flatnonzero(best < none)
         which = best[take] - 1
-        fits = np.abs(heights[take] - level[which]) < tol[which]
+        rise = heights[take] - level[which]
+        fits = (rise > -tol[which]) & (rise < (tol if above is None else above)[which])
         take, which = take[fits], which[fits]
         top_flat[candidates[take]] = which + 1
         if len(take) == 0:
@@ -784,7 +798,8 @@ def _measure_all(
     )
     edge_starts = np.searchsorted(e_top, np.arange(count))
     edge_stops = np.searchsorted(e_top, np.arange(count), side="right")
-    loose = _loose_groups(p_idx, p_top, p_h, level, tol, count)
+    reach = np.maximum(tol, FLAT_REACH_M)
+    loose = _loose_groups(p_idx, p_top, p_h, level, reach, count)
     plateaus: list[_Plateau] = []
     for t in range(count):
         if tops.counts[t] < 6:
@@ -827,7 +842,7 @@ def _measure_all(
             # a pallet's margin under the cartons, loses more of its area to the ragged edge
             # and stays what it is).
             fill = max(fill, min(_hull_area(points, float(footprint[t])) / rect_area, 1.0))
-        flatness = max(0.0, 1.0 - max(rms[t] - 0.5 * tol[t], 0.0) / tol[t])
+        flatness = max(0.0, 1.0 - max(rms[t] - 0.5 * reach[t], 0.0) / reach[t])
         p.score = fill * flatness
         if tilt[t] > settings.max_top_tilt_deg or p.score < settings.min_score:
             continue

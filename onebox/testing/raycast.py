@@ -137,6 +137,9 @@ class Box:
     size: Vec3
     rotation: tuple[Vec3, Vec3, Vec3] = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
     colour: Rgb = (190, 60, 50)
+    lid_m: float = 0.0
+    """The lid bulges up (+) or sags (-) this much at its middle, smoothly to flat at its rim
+    (cos x cos), as an overfilled or a soft carton's does; ``size`` is to the rim."""
 
     @property
     def matrix(self) -> Float64Array:
@@ -365,6 +368,15 @@ def render(scene: Scene) -> tuple[Float32Array, npt.NDArray[np.uint8]]:
             half = np.asarray(shape_.size) / 2
             # The top face's rim: a carton's edge, the dark line between two touching cartons.
             on_top = local[..., 2] > half[2] - 1e-9
+            if shape_.lid_m:
+                # The lid's point over (x, y) moves along the box's z: t' = t + b / (d . z).
+                bump = shape_.lid_m * np.cos(
+                    np.pi * np.clip(local[..., 0] / shape_.size[0], -0.5, 0.5)
+                )
+                bump *= np.cos(np.pi * np.clip(local[..., 1] / shape_.size[1], -0.5, 0.5))
+                along = dirs @ shape_.matrix[:, 2]
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    t = np.where(on_top & np.isfinite(t), t + bump / along, t)
             rim = np.minimum(half[0] - np.abs(local[..., 0]), half[1] - np.abs(local[..., 1]))
             dark = np.where(on_top & (rim < scene.seam_m), 0.45, 1.0)
         elif isinstance(shape_, Cylinder):
