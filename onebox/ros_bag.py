@@ -43,6 +43,7 @@ import numpy as np
 
 from onebox import keys
 from onebox.errors import RecordingError
+from onebox.pictures import depth_image, rgb8_image
 from onebox.recording import RecordingWriter, output_problem, written_whole
 from onebox.sync import ReportLimiter
 from schemas import (
@@ -301,18 +302,15 @@ def _decompressed(msg: Any) -> Image:
             a, b = struct.unpack_from("<ff", data, start - 8)
             q = values.astype(np.float64)
             with np.errstate(divide="ignore", invalid="ignore"):
-                metres = np.where(q > 0, a / (q - b), np.nan).astype("<f4")
-            return Image(header=header, height=height, width=width, encoding="32FC1",
-                         step=width * 4, data=metres.tobytes())  # fmt: skip
+                metres = np.where(q > 0, a / (q - b), np.nan).astype(np.float32)
+            return depth_image(metres, header)
         raise ValueError(f"{fmt!r}: compressed depth of {encoding!r} is not read")
     try:
         with PIL.Image.open(io.BytesIO(data)) as picture:
             rgb = np.asarray(picture.convert("RGB"))
     except (OSError, SyntaxError, ValueError) as e:
         raise ValueError(f"{fmt!r}: the picture does not decode ({e})") from e
-    height, width = rgb.shape[:2]
-    return Image(header=header, height=height, width=width, encoding="rgb8", step=width * 3,
-                 data=rgb.tobytes())  # fmt: skip
+    return rgb8_image(rgb, header)
 
 
 def _numbers(msg: Any, name: str) -> list[float]:

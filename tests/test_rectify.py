@@ -14,6 +14,7 @@ from scipy.spatial.transform import Rotation
 from onebox import keys
 from onebox.geometry import Intrinsics
 from onebox.perception.boxes import find_boxes
+from onebox.pictures import depth_image, rgb8_image
 from onebox.rectify import distort, lens_of
 from onebox.testing.raycast import Camera, Noise, Plane, Scene, add_noise, box_on, render
 from schemas import (
@@ -161,29 +162,6 @@ def _tf(camera: Camera) -> TFMessage:
     )
 
 
-def _depth_mm(depth_m: np.ndarray, stamp_ns: int) -> Image:
-    mm = np.where(np.isfinite(depth_m), np.rint(depth_m * 1000), 0).astype(np.uint16)
-    return Image(
-        header=Header(stamp_ns=stamp_ns, frame_id=FRAME),
-        height=mm.shape[0],
-        width=mm.shape[1],
-        encoding="16UC1",
-        step=mm.shape[1] * 2,
-        data=mm.tobytes(),
-    )
-
-
-def _colour(rgb: np.ndarray, stamp_ns: int) -> Image:
-    return Image(
-        header=Header(stamp_ns=stamp_ns, frame_id=FRAME),
-        height=rgb.shape[0],
-        width=rgb.shape[1],
-        encoding="rgb8",
-        step=rgb.shape[1] * 3,
-        data=np.ascontiguousarray(rgb).tobytes(),
-    )
-
-
 def test_a_locator_and_points_rectify_a_distorting_camera(processes, test_bus, inbox, pictures):
     """Real processes: a Kinect-like camera publishing its raw 16UC1 depth and colour with the
     lens's distortion in camera_info; the locator's boxes are where they stand, the cloud is
@@ -214,8 +192,8 @@ def test_a_locator_and_points_rectify_a_distorting_camera(processes, test_bus, i
         stamp_ns += 200_000_000
         header = Header(stamp_ns=stamp_ns, frame_id=FRAME)
         publishers["info"].publish(msgspec.structs.replace(info, header=header))
-        publishers["colour"].publish(_colour(colour, stamp_ns))
-        publishers["depth"].publish(_depth_mm(depth, stamp_ns))
+        publishers["colour"].publish(rgb8_image(colour, header))
+        publishers["depth"].publish(depth_image(depth, header, "16UC1"))
         try:
             inbox.wait(boxes_and_cloud, timeout_s=0.5)
         except AssertionError:
