@@ -40,6 +40,9 @@ FISHEYE = ("equidistant",)
 MODELS = POLYNOMIAL + FISHEYE
 TOLERANCE = 1e-12
 """Coefficients smaller than this are zero: the lens is a pinhole already."""
+MAX_PIXELS = 4096 * 4096
+"""A lens's picture larger than this is refused: no depth camera sends one, and a map for a
+hostile camera_info's size would take gigabytes."""
 
 
 def distort(
@@ -133,16 +136,21 @@ def _rectifier(
     model: str,
     d: tuple[float, ...],
 ) -> Rectifier:
-    if width <= 0 or height <= 0:
-        raise ValueError(f"camera info is {width} x {height} pixels; a lens needs its size")
+    if width <= 0 or height <= 0 or width * height > MAX_PIXELS:
+        raise ValueError(
+            f"camera info is {width} x {height} pixels; a lens with distortion needs its "
+            f"picture's size (at most {MAX_PIXELS:,} pixels)"
+        )
     across, down = pinhole.rays(width, height)
     x = np.broadcast_to(across[np.newaxis, :], (height, width))
     y = np.broadcast_to(down[:, np.newaxis], (height, width))
-    xd, yd = distort(model, d, x, y)
-    # The middle of raw pixel u is at u: the nearest raw pixel is the rounded position.
-    u = np.rint(xd * raw.fx + raw.cx)
-    v = np.rint(yd * raw.fy + raw.cy)
-    inside = ((u >= 0) & (u < width) & (v >= 0) & (v < height)).reshape(-1)
+    # Wild coefficients overflow far from the middle: those rays land nowhere.
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        xd, yd = distort(model, d, x, y)
+        # The middle of raw pixel u is at u: the nearest raw pixel is the rounded position.
+        u = np.rint(xd * raw.fx + raw.cx)
+        v = np.rint(yd * raw.fy + raw.cy)
+        inside = ((u >= 0) & (u < width) & (v >= 0) & (v < height)).reshape(-1)
     source = np.where(inside, (v * width + u).reshape(-1), 0).astype(np.intp)
     unseen = np.flatnonzero(~inside)
     source.flags.writeable = False

@@ -103,6 +103,12 @@ def test_lens_of_reads_every_kind_of_camera_info():
         bad = CameraInfo(width=640, height=576, distortion_model=model, d=d, k=info_of(camera).k)
         with pytest.raises(ValueError, match=words.replace("[", r"\[").replace("]", r"\]")):
             lens_of(bad)
+    huge = msgspec.structs.replace(info_of(camera), width=100_000, height=100_000)
+    with pytest.raises(ValueError, match="100000 x 100000 pixels"):
+        lens_of(huge)
+    wild = msgspec.structs.replace(info_of(camera), d=[1e300, 1e300, 0.0, 0.0, 1e300])
+    _, rectifier = lens_of(wild)  # no warning, no error: the rays that overflow see nothing
+    assert rectifier is not None and len(rectifier.unseen) > 0
 
 
 def test_rectified_depth_is_the_pinhole_picture(pictures):
