@@ -285,7 +285,7 @@ def _decompressed(msg: Any) -> Image:
         try:
             with PIL.Image.open(io.BytesIO(data[start:])) as picture:
                 values = np.asarray(picture)
-        except (OSError, SyntaxError) as e:
+        except (OSError, SyntaxError, PIL.Image.DecompressionBombError) as e:
             raise ValueError(f"{fmt!r}: the PNG does not decode ({e})") from e
         if values.ndim != 2:
             raise ValueError(f"{fmt!r}: a PNG of {values.shape}, not one channel")
@@ -308,7 +308,7 @@ def _decompressed(msg: Any) -> Image:
     try:
         with PIL.Image.open(io.BytesIO(data)) as picture:
             rgb = np.asarray(picture.convert("RGB"))
-    except (OSError, SyntaxError, ValueError) as e:
+    except (OSError, SyntaxError, ValueError, PIL.Image.DecompressionBombError) as e:
         raise ValueError(f"{fmt!r}: the picture does not decode ({e})") from e
     return rgb8_image(rgb, header)
 

@@ -409,3 +409,39 @@ def test_a_bag_of_compressed_pictures_comes_in_as_the_raw_pictures(tmp_path):
     seen = np.isfinite(truth)
     assert np.array_equal(np.isfinite(metres), seen)
     assert np.abs(metres[seen] - truth[seen]).max() < 0.0001, "within the quantisation"
+
+
+def test_a_damaged_compressed_picture_is_left_out_and_counted(tmp_path):
+    """A compressedDepth message whose PNG is cut short is left out and counted by topic; the
+    good ones around it come in. A bag whose only depth does not decode says so in one line."""
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    good = struct.pack("<iff", 0, 0.0, 0.0) + _png16(np.full((4, 6), 700, np.uint16))
+    lens = Intrinsics(5.0, 5.0, 2.5, 1.5)
+    topic = f"{ALIGNED}/image_raw/compressedDepth"
+
+    def bag(name: str, payloads: list[bytes]) -> Path:
+        path = tmp_path / name
+        with path.open("wb") as f:
+            writer = Ros2Writer(f)
+            compressed, info = (
+                writer.register_msgdef(n, store.generate_msgdef(n, ros_version=2)[0])
+                for n in ("sensor_msgs/msg/CompressedImage", "sensor_msgs/msg/CameraInfo")
+            )
+            for n, data in enumerate(payloads):
+                t = 1_000_000_000 + n
+                fmt = "16UC1; compressedDepth png"
+                writer.write_message(topic, compressed, _compressed(t, "o", fmt, data), t, t)
+                writer.write_message(
+                    f"{ALIGNED}/camera_info", info, _info(t, "o", lens, 6, 4), t, t
+                )
+            writer.finish()
+        return path
+
+    out = tmp_path / "run.mcap"
+    done = run_onebox("import", str(bag("some.mcap", [good, good[:40], good])), str(out))
+    assert done.returncode == 0, done.stderr
+    assert f"left out, damaged: {topic} (1)" in done.stdout
+    assert sum(1 for i in iter_messages(out) if i.key == keys.CAMERA.depth) == 2
+    done = run_onebox("import", str(bag("none.mcap", [good[:40]])), str(tmp_path / "no.mcap"))
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert "the PNG does not decode" in done.stderr and "holds no depth picture" in done.stderr
