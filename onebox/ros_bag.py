@@ -8,6 +8,12 @@ recording (zstd) of:
   its lens             sensor_msgs/CameraInfo beside it           ->  camera/camera_info
   the colour picture   sensor_msgs/Image rgb8, bgr8, rgba8, bgra8 ->  camera/image_raw
   the fixed frames     tf2_msgs/TFMessage on .../tf_static        ->  tf_static (all of them)
+  a moving camera      its chain through /tf at each depth stamp  ->  camera/pose
+
+A camera on an arm hangs off a moving transform: its pose in ``world_frame`` (default: the
+root of its tree) is looked up at each depth picture's stamp as tf2 does (between the two
+samples of each moving transform around the stamp, never extrapolated past 0.2 s) and written
+on camera/pose with the picture's stamp, for a locator run with ``--pose-source pose``.
 
 Bags recorded to save space often hold only ``image_transport``'s compressed topics; those are
 read too: ``.../compressedDepth`` (sensor_msgs/CompressedImage, a 12-byte header and a PNG:
@@ -29,9 +35,11 @@ with ``--slop-ms`` (half the frame period) to pair them.
 
 from __future__ import annotations
 
+import bisect
 import contextlib
 import io
 import logging
+import math
 import struct
 from collections import Counter
 from collections.abc import Callable
@@ -40,9 +48,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from onebox import keys
 from onebox.errors import RecordingError
+from onebox.geometry import Float64Array, FrameError, FrameTree
 from onebox.pictures import depth_image, rgb8_image
 from onebox.recording import RecordingWriter, output_problem, written_whole
 from onebox.sync import ReportLimiter
@@ -115,6 +125,8 @@ class Choice:
     pictures: tuple[Picture, ...]
     colour_left_out: str = ""
     """Why no colour picture is taken, when there is a colour topic."""
+    tf: tuple[str, ...] = ()
+    """The bag's moving transforms (``/tf``): a camera on an arm or a robot."""
 
 
 @dataclass
@@ -130,6 +142,10 @@ class ImportResult:
     """Messages that did not decode or convert, by topic."""
     distorted: bool = False
     """The depth lens has distortion coefficients (kept: the locator rectifies as it reads)."""
+    world_frame: str = ""
+    """The frame camera/pose places the camera in, when the camera moves (on ``/tf``)."""
+    unplaced: int = 0
+    """Depth pictures of a moving camera with no transform at their stamp (no camera/pose)."""
 
 
 def _folder(topic: str) -> str:
@@ -252,7 +268,12 @@ def choose(
     tf_static = tuple(
         c.topic for c in reader.connections if c.msgtype == TF and c.topic.endswith("tf_static")
     )
-    return Choice(chosen, lens, picked, tf_static, tuple(pictures), why)
+    tf = tuple(
+        dict.fromkeys(
+            c.topic for c in reader.connections if c.msgtype == TF and c.topic not in tf_static
+        )
+    )
+    return Choice(chosen, lens, picked, tf_static, tuple(pictures), why, tf)
 
 
 def _image(msg: Any, encoding: str) -> Image:
@@ -376,6 +397,117 @@ def _open(source: Path) -> Any:
     return reader
 
 
+MAX_TF_GAP_NS = 200_000_000
+"""A moving transform is looked up between its two samples around a picture's stamp; past its
+first or last sample by more than this it is not known there (tf2 does not extrapolate)."""
+
+
+class Motion:
+    """The transforms of a bag's ``/tf`` and ``tf_static``, to place the camera at each
+    picture's stamp as tf2 would: a moving frame between its two samples around the stamp
+    (translation linear, turn by slerp), a fixed one as it is."""
+
+    def __init__(self) -> None:
+        self.statics: dict[str, TransformStamped] = {}
+        self._samples: dict[str, list[tuple[int, str, Float64Array, Float64Array]]] = {}
+
+    def add(self, transform: TransformStamped, moving: bool) -> None:
+        child = transform.child_frame_id
+        if not moving:
+            self.statics[child] = transform
+            return
+        v, q = transform.transform.translation, transform.transform.rotation
+        self._samples.setdefault(child, []).append(
+            (
+                transform.header.stamp_ns,
+                transform.header.frame_id,
+                np.array([v.x, v.y, v.z]),
+                np.array([q.x, q.y, q.z, q.w]),
+            )
+        )
+
+    def finish(self) -> None:
+        for samples in self._samples.values():
+            samples.sort(key=lambda sample: sample[0])
+
+    def chain(self, frame: str) -> tuple[str, bool]:
+        """The root above ``frame`` and whether a moving transform is on the way up."""
+        moving, seen = False, {frame}
+        while True:
+            if frame in self._samples:
+                moving, frame = True, self._samples[frame][-1][1]
+            elif frame in self.statics:
+                frame = self.statics[frame].header.frame_id
+            else:
+                return frame, moving
+            if frame in seen:  # a loop: FrameTree refuses it when the pose is looked up
+                return frame, moving
+            seen.add(frame)
+
+    def at(self, stamp_ns: int) -> list[TransformStamped]:
+        """Every transform as it stood at ``stamp_ns`` (moving frames not known then left out)."""
+        result = dict(self.statics)
+        for child, samples in self._samples.items():
+            stamps = [sample[0] for sample in samples]
+            i = bisect.bisect_left(stamps, stamp_ns)
+            if i < len(samples) and stamps[i] == stamp_ns:
+                lo = hi = samples[i]
+            elif 0 < i < len(samples):
+                lo, hi = samples[i - 1], samples[i]
+            elif i == 0 and stamps[0] - stamp_ns <= MAX_TF_GAP_NS:
+                lo = hi = samples[0]
+            elif i == len(samples) and stamp_ns - stamps[-1] <= MAX_TF_GAP_NS:
+                lo = hi = samples[-1]
+            else:
+                result.pop(child, None)
+                continue
+            share = 0.0 if hi[0] == lo[0] else (stamp_ns - lo[0]) / (hi[0] - lo[0])
+            t = lo[2] + share * (hi[2] - lo[2])
+            q = _slerp(lo[3], hi[3], share)
+            result[child] = TransformStamped(
+                header=Header(stamp_ns=stamp_ns, frame_id=hi[1]),
+                child_frame_id=child,
+                transform=Transform(
+                    translation=Vector3(x=float(t[0]), y=float(t[1]), z=float(t[2])),
+                    rotation=Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])),
+                ),
+            )
+        return list(result.values())
+
+    def pose(self, world: str, frame: str, stamp_ns: int) -> TransformStamped | None:
+        """``world <- frame`` at ``stamp_ns`` as camera/pose carries it, or None when unknown."""
+        try:
+            matrix = FrameTree(self.at(stamp_ns)).lookup(world, frame)
+        except FrameError:
+            return None
+        x, y, z, w = (float(v) for v in Rotation.from_matrix(matrix[:3, :3]).as_quat())
+        return TransformStamped(
+            header=Header(stamp_ns=stamp_ns, frame_id=world),
+            child_frame_id=frame,
+            transform=Transform(
+                translation=Vector3(
+                    x=float(matrix[0, 3]), y=float(matrix[1, 3]), z=float(matrix[2, 3])
+                ),
+                rotation=Quaternion(x=x, y=y, z=z, w=w),
+            ),
+        )
+
+
+def _slerp(a: Float64Array, b: Float64Array, share: float) -> Float64Array:
+    a = a / np.linalg.norm(a)
+    b = b / np.linalg.norm(b)
+    dot = float(a @ b)
+    if dot < 0.0:  # the shorter way round
+        b, dot = -b, -dot
+    if dot > 0.9995:
+        q = a + share * (b - a)
+    else:
+        angle = math.acos(dot)
+        q = (math.sin((1 - share) * angle) * a + math.sin(share * angle) * b) / math.sin(angle)
+    result: Float64Array = q / np.linalg.norm(q)
+    return result
+
+
 def import_bag(
     source: Path,
     destination: Path,
@@ -383,10 +515,14 @@ def import_bag(
     depth: str | None = None,
     colour: str | None = None,
     info: str | None = None,
+    world_frame: str | None = None,
     overwrite: bool = False,
     progress: Callable[[int, int], None] | None = None,
 ) -> ImportResult:
     """Write the camera topics of the bag ``source`` into the onebox recording ``destination``.
+
+    When the camera's frame hangs off a moving transform (``/tf``), each depth picture also
+    gets the camera's pose on camera/pose, in ``world_frame`` (default: the root of its tree).
 
     ``progress(done, total)`` is called every few hundred messages. Raises BagError with a line
     that says what to do; nothing is left at ``destination`` then.
@@ -405,10 +541,42 @@ def import_bag(
             except OSError as e:
                 raise BagError(f"cannot create {destination}: {e.strerror}") from e
             with writer:
-                result = _copy(reader, choice, writer, progress)
+                result = _copy(reader, choice, writer, progress, world_frame)
     except OSError as e:
         raise BagError(f"cannot write {destination}: {e.strerror or e}") from e
     return result
+
+
+def _motion(reader: Any, choice: Choice, limiter: ReportLimiter) -> Motion:
+    """Every transform of the bag, when the depth picture's frame hangs off a moving one."""
+    motion = Motion()
+    moving = set(choice.tf)
+    connections = [c for c in reader.connections if c.topic in moving | set(choice.tf_static)]
+    for connection, _, raw in reader.messages(connections=connections):
+        try:
+            for t in reader.deserialize(raw, connection.msgtype).transforms:
+                motion.add(_transform(t), connection.topic in moving)
+        except Exception as e:  # a damaged message of any kind: reported by topic, left out
+            limiter.warn(connection.topic, "bad", f"left out: {type(e).__name__}: {e}")
+    motion.finish()
+    return motion
+
+
+def _place(
+    motion: Motion,
+    header: Header,
+    world: str,
+    result: ImportResult,
+    writer: RecordingWriter,
+    log_time_ns: int,
+) -> None:
+    """camera/pose for a depth picture of a moving camera, stamped as the picture."""
+    pose = motion.pose(world, header.frame_id, header.stamp_ns)
+    if pose is None:
+        result.unplaced += 1
+        return
+    writer.add(keys.CAMERA.pose, codec(TransformStamped).encode(pose), log_time_ns)
+    result.written[keys.CAMERA.pose] += 1
 
 
 def _copy(
@@ -416,6 +584,7 @@ def _copy(
     choice: Choice,
     writer: RecordingWriter,
     progress: Callable[[int, int], None] | None,
+    world_frame: str | None,
 ) -> ImportResult:
     result = ImportResult(choice)
     routes: dict[str, str] = {choice.depth.topic: keys.CAMERA.depth, choice.info: keys.CAMERA.info}
@@ -424,12 +593,14 @@ def _copy(
     for topic in choice.tf_static:
         routes[topic] = keys.TF_STATIC
     statics: dict[str, TransformStamped] = {}
+    limiter = ReportLimiter(log)
+    motion = _motion(reader, choice, limiter) if choice.tf else None
+    world: str | None = None
     total = sum(c.msgcount for c in reader.connections)
     wanted = [c for c in reader.connections if c.topic in routes]
     for c in reader.connections:
-        if c.topic not in routes:
+        if c.topic not in routes and (motion is None or c.topic not in choice.tf):
             result.left_out[c.topic] += c.msgcount
-    limiter = ReportLimiter(log)
     done = 0
     for connection, log_time_ns, raw in reader.messages(connections=wanted):
         done += 1
@@ -447,6 +618,13 @@ def _copy(
             continue
         if isinstance(message, CameraInfo):
             result.distorted |= any(abs(v) > 1e-9 for v in message.d)
+        if motion is not None and key == keys.CAMERA.depth and isinstance(message, Image):
+            if world is None:  # decided on the first picture: does the camera move?
+                root, moving = motion.chain(message.header.frame_id)
+                world = (world_frame or root) if moving else ""
+                result.world_frame = world
+            if world:
+                _place(motion, message.header, world, result, writer, log_time_ns)
         payload = codec(type(message)).encode(message)
         writer.add(key, payload, log_time_ns)
         result.written[key] += 1

@@ -14,10 +14,14 @@ the pictures' encodings; ``--depth``, ``--colour`` and ``--info`` name topics ou
 with several depth pictures needs ``--depth`` unless one is aligned to the colour). Stamps are
 the bag's header stamps.
 
-A real camera stamps depth and colour apart: run the locator with ``--slop-ms`` (about half the
-frame period, ONEBOX_SLOP_MS) so that they pair. The locator reports in the camera's optical
-frame unless its world frame is on tf_static (ONEBOX_WORLD_FRAME=base_link). Refuses to
-overwrite OUT without --overwrite, and never leaves a partial OUT behind.
+A camera that moves (on an arm: its frame hangs off ``/tf``) gets its pose at each depth
+picture's stamp on camera/pose, in ``--world-frame`` (default: the root of its tree), looked up
+as tf2 does (between the two samples around the stamp); run the locator with ``--pose-source
+pose`` and that world frame. A real camera stamps depth and colour apart: run the locator with
+``--slop-ms`` (about half the frame period, ONEBOX_SLOP_MS) so that they pair. The locator
+reports in the camera's optical frame unless its world frame is on tf_static
+(ONEBOX_WORLD_FRAME=base_link). Refuses to overwrite OUT without --overwrite, and never leaves a
+partial OUT behind.
 """
 
 from __future__ import annotations
@@ -38,6 +42,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--depth", metavar="TOPIC", help="the depth picture's topic")
     parser.add_argument("--colour", metavar="TOPIC", help="the colour picture's topic")
     parser.add_argument("--info", metavar="TOPIC", help="the depth picture's CameraInfo topic")
+    parser.add_argument(
+        "--world-frame",
+        metavar="FRAME",
+        help="a moving camera (on /tf) is placed in this frame on camera/pose (default: the "
+        "root of its tree)",
+    )
     parser.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
 
 
@@ -48,6 +58,7 @@ def main(args: argparse.Namespace) -> int:
         depth=args.depth,
         colour=args.colour,
         info=args.info,
+        world_frame=args.world_frame,
         overwrite=args.overwrite,
         progress=Progress("import"),
     )
@@ -63,6 +74,14 @@ def main(args: argparse.Namespace) -> int:
         print(f"  colour  left out: {choice.colour_left_out}")
     if choice.tf_static:
         print(f"  frames  {', '.join(choice.tf_static)}")
+    if result.world_frame:
+        missing = (
+            f", {result.unplaced} without a transform at their stamp" if result.unplaced else ""
+        )
+        print(
+            f"  pose    from {', '.join(choice.tf)}: the camera moves; camera/pose in "
+            f"{result.world_frame!r} at each picture's stamp{missing}"
+        )
     for key, count in sorted(result.written.items()):
         print(f"  {key:<24} {count:>6} messages")
     if result.left_out:
@@ -78,4 +97,9 @@ def main(args: argparse.Namespace) -> int:
             choice.info,
         )
     print(f"import: wrote {args.destination}: {sum(result.written.values())} messages")
+    if result.world_frame:
+        print(
+            "  replay it to a locator run with --pose-source pose and "
+            f"ONEBOX_WORLD_FRAME={result.world_frame}"
+        )
     return 0

@@ -16,11 +16,11 @@ from mcap_ros2.writer import Writer as Ros2Writer
 from rosbags.typesys import Stores, get_typestore
 
 from onebox import keys
-from onebox.geometry import Intrinsics
+from onebox.geometry import Intrinsics, matrix_of
 from onebox.recording import iter_messages
 from onebox.testing.processes import Inbox, run_onebox
 from onebox.testing.raycast import Camera, Noise, Plane, Scene, add_noise, box_on, render
-from schemas import CameraInfo, Detection3DArray, Image, TFMessage, codec
+from schemas import CameraInfo, Detection3DArray, Image, TFMessage, TransformStamped, codec
 
 ROS = "/camera/camera"
 ALIGNED = f"{ROS}/aligned_depth_to_color"
@@ -445,3 +445,121 @@ def test_a_damaged_compressed_picture_is_left_out_and_counted(tmp_path):
     done = run_onebox("import", str(bag("none.mcap", [good[:40]])), str(tmp_path / "no.mcap"))
     assert done.returncode == 2 and "Traceback" not in done.stderr
     assert "the PNG does not decode" in done.stderr and "holds no depth picture" in done.stderr
+
+
+def _turned_z(angle_deg: float) -> np.ndarray:
+    c, s = math.cos(math.radians(angle_deg)), math.sin(math.radians(angle_deg))
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _moving_optical(t_s: float) -> np.ndarray:
+    """world <- camera_color_optical_frame at t_s: a camera on an arm sliding 10 cm along x and
+    turning 16 degrees about the world's up, both at a constant rate, over one second."""
+    start = Camera.tilted(0.7, 20.0, width=320, height=240).camera_to_world
+    pose = np.eye(4)
+    pose[:3, :3] = _turned_z(-8.0 + 16.0 * t_s) @ start[:3, :3]
+    pose[:3, 3] = start[:3, 3] + np.array([-0.05 + 0.10 * t_s, 0.0, 0.0])
+    return pose
+
+
+@pytest.fixture(scope="module")
+def moving_bag(tmp_path_factory) -> tuple[Path, list[tuple[int, np.ndarray]]]:
+    """A camera on an arm: /tf world -> camera_link every 50 ms, tf_static camera_link ->
+    optical, four depth pictures stamped between /tf's samples, each rendered from where the
+    camera was at its stamp."""
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    path = tmp_path_factory.mktemp("arm") / "arm.mcap"
+    optical = "camera_color_optical_frame"
+    link_in_optical = np.eye(4)
+    link_in_optical[:3, :3] = _quat_matrix(*OPTICAL_IN_LINK).T
+    start = 1_700_000_000_000_000_000
+    base = Camera.tilted(0.7, 20.0, width=320, height=240)
+    truth = []
+    with path.open("wb") as f:
+        writer = Ros2Writer(f)
+        image, info, tf = (
+            writer.register_msgdef(n, store.generate_msgdef(n, ros_version=2)[0])
+            for n in (
+                "sensor_msgs/msg/Image",
+                "sensor_msgs/msg/CameraInfo",
+                "tf2_msgs/msg/TFMessage",
+            )
+        )
+        fixed = _transform("camera_link", optical, np.zeros(3), OPTICAL_IN_LINK)
+        writer.write_message("/tf_static", tf, {"transforms": [fixed]}, start, start)
+        for k in range(21):
+            t = start + k * 50_000_000
+            link = _moving_optical(k * 0.05) @ link_in_optical
+            moved = _transform("world", "camera_link", link[:3, 3], _matrix_quat(link[:3, :3]))
+            moved["header"] = _header(t, "world")
+            writer.write_message("/tf", tf, {"transforms": [moved]}, t, t)
+        for n in range(4):
+            t = start + 110_000_000 + n * 200_000_000
+            pose = _moving_optical((t - start) / 1e9)
+            camera = Camera(320, 240, base.lens, pose)
+            depth_m, _ = render(Scene(camera, Plane(), BOXES))
+            depth_mm = np.where(np.isfinite(depth_m), np.rint(depth_m * 1000), 0).astype(np.uint16)
+            writer.write_message(
+                f"{ALIGNED}/image_raw", image, _image(t, optical, depth_mm, "16UC1"), t, t
+            )
+            writer.write_message(
+                f"{ALIGNED}/camera_info", info, _info(t, optical, base.lens, 320, 240), t, t
+            )
+            truth.append((t, pose))
+        writer.finish()
+    return path, truth
+
+
+def test_a_moving_camera_gets_its_pose_at_each_pictures_stamp(moving_bag, tmp_path):
+    path, truth = moving_bag
+    out = tmp_path / "run.mcap"
+    done = run_onebox("import", str(path), str(out))
+    assert done.returncode == 0, done.stderr
+    assert "pose    from /tf: the camera moves; camera/pose in 'world'" in done.stdout
+    assert "--pose-source pose and ONEBOX_WORLD_FRAME=world" in done.stdout
+    poses = [
+        codec(TransformStamped).decode(i.payload)
+        for i in iter_messages(out)
+        if i.key == keys.CAMERA.pose
+    ]
+    assert [p.header.stamp_ns for p in poses] == [t for t, _ in truth]
+    for pose, (_, true) in zip(poses, truth, strict=True):
+        assert (pose.header.frame_id, pose.child_frame_id) == (
+            "world",
+            "camera_color_optical_frame",
+        )
+        assert np.allclose(matrix_of(pose), true, atol=1e-6), "interpolated as tf2 does"
+    again = run_onebox(
+        "import", str(path), str(tmp_path / "b.mcap"), "--world-frame", "camera_link"
+    )
+    assert "in 'camera_link'" in again.stdout
+
+
+def test_a_moving_camera_replayed_puts_the_boxes_where_they_stand(
+    moving_bag, tmp_path, processes, test_bus
+):
+    """The locator, fed camera/pose from the bag's /tf, measures in the world from a camera
+    that moves between pictures: the boxes stay where they stand."""
+    path, _ = moving_bag
+    out = tmp_path / "run.mcap"
+    assert run_onebox("import", str(path), str(out)).returncode == 0
+    inbox = Inbox()
+    test_bus.subscribe_raw(keys.DETECTIONS, inbox)
+    processes.start("locator", "--pose-source", "pose", "--log-interval-s", "1")
+    processes.start("replay", str(out), "--loop", "--wait-s", "10")
+
+    def pictures_measured(items: list[tuple[str, bytes]]) -> bool:
+        arrays = [codec(Detection3DArray).decode(p) for _, p in items]
+        return len({a.header.stamp_ns for a in arrays if a.detections}) >= 3
+
+    inbox.wait(pictures_measured, timeout_s=60)
+    arrays = [codec(Detection3DArray).decode(p) for _, p in inbox.items]
+    for found in (a for a in arrays if a.detections):
+        assert found.header.frame_id == "world"
+        assert len(found.detections) == len(BOXES)
+        for true in BOXES:
+            c = min(
+                (d.bbox.center.position for d in found.detections),
+                key=lambda c: math.dist(true.centre, (c.x, c.y, c.z)),
+            )
+            assert math.dist(true.centre, (c.x, c.y, c.z)) < 0.006
