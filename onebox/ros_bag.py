@@ -35,7 +35,6 @@ with ``--slop-ms`` (half the frame period) to pair them.
 
 from __future__ import annotations
 
-import bisect
 import contextlib
 import io
 import logging
@@ -48,6 +47,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
 from onebox import keys
@@ -410,6 +410,7 @@ class Motion:
     def __init__(self) -> None:
         self.statics: dict[str, TransformStamped] = {}
         self._samples: dict[str, list[tuple[int, str, Float64Array, Float64Array]]] = {}
+        self._stamps: dict[str, npt.NDArray[np.int64]] = {}
 
     def add(self, transform: TransformStamped, moving: bool) -> None:
         child = transform.child_frame_id
@@ -427,8 +428,10 @@ class Motion:
         )
 
     def finish(self) -> None:
-        for samples in self._samples.values():
+        """Sort the samples by stamp (a bag's /tf may come from several publishers)."""
+        for child, samples in self._samples.items():
             samples.sort(key=lambda sample: sample[0])
+            self._stamps[child] = np.array([sample[0] for sample in samples], dtype=np.int64)
 
     def chain(self, frame: str) -> tuple[str, bool]:
         """The root above ``frame`` and whether a moving transform is on the way up."""
@@ -444,40 +447,55 @@ class Motion:
                 return frame, moving
             seen.add(frame)
 
-    def at(self, stamp_ns: int) -> list[TransformStamped]:
-        """Every transform as it stood at ``stamp_ns`` (moving frames not known then left out)."""
-        result = dict(self.statics)
-        for child, samples in self._samples.items():
-            stamps = [sample[0] for sample in samples]
-            i = bisect.bisect_left(stamps, stamp_ns)
-            if i < len(samples) and stamps[i] == stamp_ns:
-                lo = hi = samples[i]
-            elif 0 < i < len(samples):
-                lo, hi = samples[i - 1], samples[i]
-            elif i == 0 and stamps[0] - stamp_ns <= MAX_TF_GAP_NS:
-                lo = hi = samples[0]
-            elif i == len(samples) and stamp_ns - stamps[-1] <= MAX_TF_GAP_NS:
-                lo = hi = samples[-1]
+    def _at(self, child: str, stamp_ns: int) -> TransformStamped | None:
+        """A moving frame's transform at ``stamp_ns``, or None when it is not known then."""
+        samples, stamps = self._samples[child], self._stamps[child]
+        i = int(np.searchsorted(stamps, stamp_ns))
+        if i < len(samples) and stamps[i] == stamp_ns:
+            lo = hi = samples[i]
+        elif 0 < i < len(samples):
+            lo, hi = samples[i - 1], samples[i]
+        elif i == 0 and stamps[0] - stamp_ns <= MAX_TF_GAP_NS:
+            lo = hi = samples[0]
+        elif i == len(samples) and stamp_ns - stamps[-1] <= MAX_TF_GAP_NS:
+            lo = hi = samples[-1]
+        else:
+            return None
+        share = 0.0 if hi[0] == lo[0] else (stamp_ns - lo[0]) / (hi[0] - lo[0])
+        t = lo[2] + share * (hi[2] - lo[2])
+        q = _slerp(lo[3], hi[3], share)
+        return TransformStamped(
+            header=Header(stamp_ns=stamp_ns, frame_id=hi[1]),
+            child_frame_id=child,
+            transform=Transform(
+                translation=Vector3(x=float(t[0]), y=float(t[1]), z=float(t[2])),
+                rotation=Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])),
+            ),
+        )
+
+    def _up_from(self, frame: str, stamp_ns: int) -> list[TransformStamped]:
+        """The transforms from ``frame`` up to its root as they stood at ``stamp_ns`` (a moving
+        one not known then ends the walk)."""
+        found: list[TransformStamped] = []
+        seen = {frame}
+        while True:
+            if frame in self._samples:
+                transform = self._at(frame, stamp_ns)
             else:
-                result.pop(child, None)
-                continue
-            share = 0.0 if hi[0] == lo[0] else (stamp_ns - lo[0]) / (hi[0] - lo[0])
-            t = lo[2] + share * (hi[2] - lo[2])
-            q = _slerp(lo[3], hi[3], share)
-            result[child] = TransformStamped(
-                header=Header(stamp_ns=stamp_ns, frame_id=hi[1]),
-                child_frame_id=child,
-                transform=Transform(
-                    translation=Vector3(x=float(t[0]), y=float(t[1]), z=float(t[2])),
-                    rotation=Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])),
-                ),
-            )
-        return list(result.values())
+                transform = self.statics.get(frame)
+            if transform is None:
+                return found
+            found.append(transform)
+            frame = transform.header.frame_id
+            if frame in seen:
+                return found
+            seen.add(frame)
 
     def pose(self, world: str, frame: str, stamp_ns: int) -> TransformStamped | None:
         """``world <- frame`` at ``stamp_ns`` as camera/pose carries it, or None when unknown."""
         try:
-            matrix = FrameTree(self.at(stamp_ns)).lookup(world, frame)
+            tree = FrameTree(self._up_from(frame, stamp_ns) + self._up_from(world, stamp_ns))
+            matrix = tree.lookup(world, frame)
         except FrameError:
             return None
         x, y, z, w = (float(v) for v in Rotation.from_matrix(matrix[:3, :3]).as_quat())
