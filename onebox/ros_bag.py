@@ -41,7 +41,7 @@ import logging
 import math
 import struct
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -353,16 +353,26 @@ def _camera_info(msg: Any) -> CameraInfo:
     )
 
 
-def _transform(t: Any) -> TransformStamped:
-    v, q = t.transform.translation, t.transform.rotation
+def _stamped(
+    header: Header,
+    child: str,
+    t: Sequence[float] | Float64Array,
+    q_xyzw: Sequence[float] | Float64Array,
+) -> TransformStamped:
+    x, y, z, w = (float(v) for v in q_xyzw)
     return TransformStamped(
-        header=_header(t.header),
-        child_frame_id=str(t.child_frame_id),
+        header=header,
+        child_frame_id=child,
         transform=Transform(
-            translation=Vector3(x=float(v.x), y=float(v.y), z=float(v.z)),
-            rotation=Quaternion(x=float(q.x), y=float(q.y), z=float(q.z), w=float(q.w)),
+            translation=Vector3(x=float(t[0]), y=float(t[1]), z=float(t[2])),
+            rotation=Quaternion(x=x, y=y, z=z, w=w),
         ),
     )
+
+
+def _transform(t: Any) -> TransformStamped:
+    v, q = t.transform.translation, t.transform.rotation
+    return _stamped(_header(t.header), str(t.child_frame_id), (v.x, v.y, v.z), (q.x, q.y, q.z, q.w))
 
 
 def _convert(msg: Any, key: str, statics: dict[str, TransformStamped]) -> Message | None:
@@ -462,16 +472,8 @@ class Motion:
         else:
             return None
         share = 0.0 if hi[0] == lo[0] else (stamp_ns - lo[0]) / (hi[0] - lo[0])
-        t = lo[2] + share * (hi[2] - lo[2])
-        q = _slerp(lo[3], hi[3], share)
-        return TransformStamped(
-            header=Header(stamp_ns=stamp_ns, frame_id=hi[1]),
-            child_frame_id=child,
-            transform=Transform(
-                translation=Vector3(x=float(t[0]), y=float(t[1]), z=float(t[2])),
-                rotation=Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])),
-            ),
-        )
+        header = Header(stamp_ns=stamp_ns, frame_id=hi[1])
+        return _stamped(header, child, lo[2] + share * (hi[2] - lo[2]), _slerp(lo[3], hi[3], share))
 
     def _up_from(self, frame: str, stamp_ns: int) -> list[TransformStamped]:
         """The transforms from ``frame`` up to its root as they stood at ``stamp_ns`` (a moving
@@ -498,17 +500,8 @@ class Motion:
             matrix = tree.lookup(world, frame)
         except FrameError:
             return None
-        x, y, z, w = (float(v) for v in Rotation.from_matrix(matrix[:3, :3]).as_quat())
-        return TransformStamped(
-            header=Header(stamp_ns=stamp_ns, frame_id=world),
-            child_frame_id=frame,
-            transform=Transform(
-                translation=Vector3(
-                    x=float(matrix[0, 3]), y=float(matrix[1, 3]), z=float(matrix[2, 3])
-                ),
-                rotation=Quaternion(x=x, y=y, z=z, w=w),
-            ),
-        )
+        turn = Rotation.from_matrix(matrix[:3, :3]).as_quat()
+        return _stamped(Header(stamp_ns=stamp_ns, frame_id=world), frame, matrix[:3, 3], turn)
 
 
 def _slerp(a: Float64Array, b: Float64Array, share: float) -> Float64Array:
