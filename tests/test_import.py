@@ -206,18 +206,27 @@ def test_import_takes_the_aligned_depth_its_lens_colour_and_frames(realsense_bag
     }
 
 
+def _replayed_to_a_locator(
+    bag: Path, tmp_path: Path, processes, test_bus, *locator_flags: str
+) -> Inbox:
+    """Import ``bag`` and replay it (looping) into a real locator run with ``locator_flags``;
+    the inbox collects its detections."""
+    out = tmp_path / "run.mcap"
+    assert run_onebox("import", str(bag), str(out)).returncode == 0
+    inbox = Inbox()
+    test_bus.subscribe_raw(keys.DETECTIONS, inbox)
+    processes.start("locator", *locator_flags, "--log-interval-s", "1")
+    processes.start("replay", str(out), "--loop", "--wait-s", "10")
+    return inbox
+
+
 def test_imported_bag_replayed_into_the_locator_finds_every_box(
     realsense_bag, tmp_path, processes, test_bus
 ):
     """The real pipeline on the imported bag: replay -> locator (pairing depth and colour 4 ms
     apart with --slop-ms) -> detections in the world frame through tf_static's chain."""
     path, _, _ = realsense_bag
-    out = tmp_path / "run.mcap"
-    assert run_onebox("import", str(path), str(out)).returncode == 0
-    inbox = Inbox()
-    test_bus.subscribe_raw(keys.DETECTIONS, inbox)
-    processes.start("locator", "--slop-ms", "20", "--log-interval-s", "1")
-    processes.start("replay", str(out), "--loop", "--wait-s", "10")
+    inbox = _replayed_to_a_locator(path, tmp_path, processes, test_bus, "--slop-ms", "20")
 
     def boxes_found(items: list[tuple[str, bytes]]) -> bool:
         return any(codec(Detection3DArray).decode(p).detections for _, p in items)
@@ -541,12 +550,7 @@ def test_a_moving_camera_replayed_puts_the_boxes_where_they_stand(
     """The locator, fed camera/pose from the bag's /tf, measures in the world from a camera
     that moves between pictures: the boxes stay where they stand."""
     path, _ = moving_bag
-    out = tmp_path / "run.mcap"
-    assert run_onebox("import", str(path), str(out)).returncode == 0
-    inbox = Inbox()
-    test_bus.subscribe_raw(keys.DETECTIONS, inbox)
-    processes.start("locator", "--pose-source", "pose", "--log-interval-s", "1")
-    processes.start("replay", str(out), "--loop", "--wait-s", "10")
+    inbox = _replayed_to_a_locator(path, tmp_path, processes, test_bus, "--pose-source", "pose")
 
     def pictures_measured(items: list[tuple[str, bytes]]) -> bool:
         arrays = [codec(Detection3DArray).decode(p) for _, p in items]
