@@ -69,7 +69,8 @@ def row(name: str, values: list[float], digits: int = 2) -> str:
 def report(title: str, errors: Errors, verbose: bool) -> None:
     print(
         f"{title}: {errors.pictures} pictures, {errors.found} boxes found, {errors.missed} "
-        f"missed, {errors.false} false ({errors.hidden_found} partly hidden also found); "
+        f"missed, {errors.false} false ({errors.hidden_found} of {errors.hidden} partly hidden "
+        "also found); "
         f"{np.median(errors.ms) if errors.ms else 0:.1f} ms a picture (median)"
     )
     print("  (median / p90 / worst)")
@@ -80,6 +81,7 @@ def report(title: str, errors: Errors, verbose: bool) -> None:
     print(row("length/width at 0.4 m", errors.size_mm_at_04))
     print(row("height, mm", errors.height_mm))
     print(row("height, partly hidden", errors.hidden_height_mm))
+    print(row("length/width, p. hidden", errors.hidden_size_mm))
     if verbose:
         for note in errors.notes[:30]:
             print(f"    {note}")

@@ -507,3 +507,35 @@ def test_cartons_whose_lids_bulge_or_sag_are_boxes(lid_m, sigma_m):
         assert box.size[1] == pytest.approx(min(true.size[:2]), abs=0.007)
         rim, crest = true.size[2], true.size[2] + lid_m
         assert min(rim, crest) - 0.002 <= box.size[2] <= max(rim, crest) + 0.002
+
+
+@pytest.mark.parametrize("sigma_m", [0.0, 0.001])
+def test_a_box_whose_corner_a_taller_box_in_front_hides_is_found_whole(sigma_m):
+    """A camera tilted 20 degrees sees a flat box's near corner behind a taller box in front:
+    the part of its rectangle it can see is full, so it is a box, of its whole size (the
+    finder before judged its fill over the whole rectangle, 0.83, and left it out). An
+    upright cylinder whose rectangle's corners the same box hides is still no box: its outline
+    does not hug its rectangle's sides."""
+    table = Plane((0.0, 0.0, 0.75))
+    flat = box_on(table, 0.2, 0.15, (0.3, 0.1, 0.05), 70.0, (60, 60, 200))
+    tall = box_on(table, 0.05, 0.02, (0.2, 0.15, 0.1), 20.0, (200, 60, 50))
+    camera = Camera.tilted(0.9, 20.0, target=(0.0, 0.0, 0.75), width=640, height=480)
+    depth, colour = render(Scene(camera, table, (flat, tall)))
+    noisy = add_noise(depth, Noise(sigma_m=sigma_m), np.random.default_rng(3))
+    found = find_boxes(noisy, camera.lens, camera.camera_to_world, colour)
+    assert len(found.boxes) == 2
+    box = min(found.boxes, key=lambda b: math.dist(b.top_middle, flat.top_middle))
+    assert math.dist(box.centre, flat.centre) < 0.003
+    assert box.size[0] == pytest.approx(0.3, abs=0.004)
+    assert box.size[1] == pytest.approx(0.1, abs=0.004)
+    assert box.size[2] == pytest.approx(0.05, abs=0.002)
+    assert yaw_error(box.yaw_deg, 70.0, square=False) < 1.0
+
+    for dx in (-0.06, 0.0, 0.06):
+        can = Cylinder((0.0, 0.0, 0.03), 0.05, 0.06)
+        front = box_on(Plane(), dx, -0.08, (0.12, 0.08, 0.12), 15.0, (200, 60, 50))
+        camera = Camera.tilted(0.7, 35.0, width=640, height=480)
+        depth, colour = render(Scene(camera, Plane(), (can, front)))
+        noisy = add_noise(depth, Noise(sigma_m=sigma_m), np.random.default_rng(4))
+        found = find_boxes(noisy, camera.lens, camera.camera_to_world, colour)
+        assert all(math.hypot(*b.top_middle[:2]) > 0.05 for b in found.boxes), found.boxes

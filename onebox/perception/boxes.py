@@ -32,7 +32,9 @@ How a picture is read (whole-array work; Python loops only over tops, a few scal
 5. Not a box: a top touching the picture's border (cut off), smaller than ``min_top_area_m2``
    (or (3 sigma)^2 where the depth is noisy), seen narrower than 1 cm, not parallel to the
    support, not flat, filling less than ``min_score`` of its rectangle (a disc fills pi/4;
-   under noise of 3 mm or more, a top seen whole by its hull), or curved:
+   under noise of 3 mm or more, a top seen whole by its hull; where a taller object in front
+   hides part of the rectangle, of the part seen, if every side is seen along part of it and
+   the outline seen hugs the sides), or curved:
    loosening the height tolerance four-fold widens a curved top (cylinder, ball) but not a
    box's, whose sides drop straight down.
 6. What each box stands on. Lines of probe points go out from each side at the height of each
@@ -843,6 +845,30 @@ def _measure_all(
             # and stays what it is).
             fill = max(fill, min(_hull_area(points, float(footprint[t])) / rect_area, 1.0))
         flatness = max(0.0, 1.0 - max(rms[t] - 0.5 * reach[t], 0.0) / reach[t])
+        if fill * flatness < settings.min_score and hidden[part].any():
+            # Something in front hides part of the top (a taller box nearer the camera): the
+            # fill is taken over the part of the rectangle that can be seen, when the outline
+            # seen hugs the rectangle's sides (a disc's does not, whatever hides its corners).
+            seen = _seen_fill(
+                t,
+                points,
+                extreme[part] & ~hidden[part] & ~unsure[part],
+                (hidden[part] & ~(stand_off[part] <= 3.0 * footprint[t])) | unsure[part],
+                rect,
+                float(footprint[t]),
+                float(whole_area[t]),
+                float(level[t]),
+                float(level[t] + max(1.5 * tol[t], 0.005)),
+                top_flat,
+                h_flat,
+                tops,
+                across,
+                down,
+                basis,
+                lens,
+                support,
+            )
+            fill = max(fill, seen)
         p.score = fill * flatness
         if tilt[t] > settings.max_top_tilt_deg or p.score < settings.min_score:
             continue
@@ -854,6 +880,114 @@ def _measure_all(
             continue
         p.is_box = True
     return plateaus
+
+
+HUG_SHARE = 0.85
+"""A partly hidden top counts as a rectangle only if this share of its row ends seen (not
+hidden, not next to dropout) lies within ``HUG_FOOTPRINTS`` of its rectangle's sides ..."""
+HUG_FOOTPRINTS = 2.5
+SIDE_SEEN_SHARE = 0.12
+"""... and each of its four sides is seen (outline points within that band of it, not hidden)
+along at least this share of its length."""
+
+
+def _seen_fill(
+    t: int,
+    points: Float64Array,
+    ends: BoolArray,
+    hidden_points: BoolArray,
+    rect: Rectangle,
+    footprint_m: float,
+    whole_area_m2: float,
+    level_m: float,
+    rise_m: float,
+    top_flat: npt.NDArray[np.int32],
+    h_flat: Float32Array,
+    tops: _Tops,
+    across: Float64Array,
+    down: Float64Array,
+    basis: Float64Array,
+    lens: Intrinsics,
+    support: Support,
+) -> float:
+    """The share of the part of the top's rectangle not hidden by something in front that the
+    top fills; 0 when the outline seen does not hug the rectangle (not a rectangle).
+
+    The rectangle is the extreme outline points' (plus a footprint), as for the plain fill.
+    Each crop pixel whose ray meets the top's plane inside it counts with its area there;
+    those whose reading rises above the top (``rise_m``) are hidden and left out."""
+    ax = np.asarray(rect.axis)
+    perp = np.array([-ax[1], ax[0]])
+    if rect.hidden_sides or ends.sum() < 8:
+        return 0.0
+    # The outline seen must lie on the fitted rectangle's sides ...
+    local = points - np.asarray(rect.middle)
+    u, w = local @ ax, local @ perp
+    off_u = np.abs(np.abs(u) - rect.length_m / 2)
+    off_w = np.abs(np.abs(w) - rect.width_m / 2)
+    band = HUG_FOOTPRINTS * footprint_m
+    hug = float(np.mean(np.minimum(off_u, off_w)[ends] <= band))
+    if hug < HUG_SHARE:
+        return 0.0
+    # ... and every side be seen along a good part of it (or be met by a taller neighbour's
+    # wall: what rises past it stands at it): where something in front hides a whole side,
+    # the line it is cut along passes for one and the size is unknown.
+    # (Points within the band of a side's ends belong to the sides across it as well.)
+    seen = ~hidden_points
+    along_w = np.abs(w) < rect.width_m / 2 - band
+    along_u = np.abs(u) < rect.length_m / 2 - band
+    for on_side, length in (
+        (seen & (off_u <= band) & (u > 0) & along_w, rect.width_m),
+        (seen & (off_u <= band) & (u < 0) & along_w, rect.width_m),
+        (seen & (off_w <= band) & (w > 0) & along_u, rect.length_m),
+        (seen & (off_w <= band) & (w < 0) & along_u, rect.length_m),
+    ):
+        count = int(on_side.sum())
+        if count < 2 or count * footprint_m < SIDE_SEEN_SHARE * length:
+            return 0.0
+    along, side = points @ ax, points @ perp
+    half = 0.5 * footprint_m
+    lo_a, hi_a = float(along.min()) - half, float(along.max()) + half
+    lo_b, hi_b = float(side.min()) - half, float(side.max()) + half
+    # The rectangle's corners on the top's plane, into the (padded) crop's pixels.
+    n = basis[2]
+    lift = level_m - support.offset_camera_m
+    corners = np.array(
+        [
+            (a * ax[0] - b * ax[1]) * basis[0] + (a * ax[1] + b * ax[0]) * basis[1] + lift * n
+            for a in (lo_a, hi_a)
+            for b in (lo_b, hi_b)
+        ]
+    )
+    if (corners[:, 2] <= 0).any():
+        return 0.0
+    u = lens.fx * corners[:, 0] / corners[:, 2] + lens.cx - tops.shift[1]
+    v = lens.fy * corners[:, 1] / corners[:, 2] + lens.cy - tops.shift[0]
+    rows_n = len(h_flat) // tops.width
+    r0, r1 = max(int(v.min()), 0), min(math.ceil(v.max()) + 1, rows_n)
+    c0, c1 = max(int(u.min()), 0), min(math.ceil(u.max()) + 1, tops.width)
+    if r1 <= r0 or c1 <= c0:
+        return 0.0
+    ray_x = across[np.clip(np.arange(c0, c1) + tops.shift[1], 0, len(across) - 1)]
+    ray_y = down[np.clip(np.arange(r0, r1) + tops.shift[0], 0, len(down) - 1)]
+    slope = n[0] * ray_x[np.newaxis, :] + n[1] * ray_y[:, np.newaxis] + n[2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        depth = lift / slope
+    x, y = ray_x[np.newaxis, :] * depth, ray_y[:, np.newaxis] * depth
+    pa = basis[0, 0] * x + basis[0, 1] * y + basis[0, 2] * depth
+    pb = basis[1, 0] * x + basis[1, 1] * y + basis[1, 2] * depth
+    pa, pb = pa * ax[0] + pb * ax[1], pb * ax[0] - pa * ax[1]
+    inside = (depth > 0) & (pa >= lo_a) & (pa <= hi_a) & (pb >= lo_b) & (pb <= hi_b)
+    window = (slice(r0, r1), slice(c0, c1))
+    heights = h_flat.reshape(rows_n, tops.width)[window]
+    mine = top_flat.reshape(rows_n, tops.width)[window] == t + 1
+    with np.errstate(invalid="ignore"):
+        hidden = inside & ~mine & (heights > rise_m)
+    area = depth * depth / (np.abs(slope) * lens.fx * lens.fy)
+    seen_m2 = float(area[inside].sum() - area[hidden].sum())
+    if seen_m2 <= 0.0:
+        return 0.0
+    return min(whole_area_m2 / seen_m2, 1.0)
 
 
 RAGGED_TOLERANCE_M = 0.01

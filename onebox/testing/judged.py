@@ -86,6 +86,12 @@ class Judged:
     false: int = 0
     pictures: int = 0
     hidden_found: int = 0
+    hidden: int = 0
+    """Boxes whose top is in the picture but partly hidden (under or behind another box), not
+    under two or more (a platform's)."""
+    hidden_size_mm: list[float] = field(default_factory=list)
+    """Length and width errors of partly hidden boxes found with every side seen (the finder
+    then gives their whole size, not a lower bound)."""
     notes: list[str] = field(default_factory=list)
 
 
@@ -116,6 +122,8 @@ def judge(found: Found, rendered: Rendered, judged: Judged) -> None:
         for b, n in zip(boxes, rendered.whole_top_px, strict=True)
     ]
     unjudged = {i for i, n in enumerate(carried) if n >= 2 or not seen[i]}
+    partly = {i for i, b in enumerate(boxes) if b.top_in_view and not seen[i] and carried[i] < 2}
+    judged.hidden += len(partly)
     used: set[int] = set()
     for box in found.boxes:
         top, centre = np.array(box.top_middle), np.array(box.centre)
@@ -136,10 +144,16 @@ def judge(found: Found, rendered: Rendered, judged: Judged) -> None:
         used.add(nearest)
         true = boxes[nearest]
         if nearest in unjudged:
-            judged.hidden_found += 1  # its whole top is not to be seen: neither right nor wrong
+            # Its whole top is not to be seen: neither right nor wrong, but counted.
+            judged.hidden_found += nearest in partly
             if carried[nearest] < 2:  # ... but its height is (not a platform's, under many)
                 height_error = abs(box.size[2] - true.size.z)
                 judged.hidden_height_mm.append(1000 * height_error)
+                if box.hidden_sides == 0 and nearest in partly:
+                    sides = sorted((true.size.x, true.size.y), reverse=True)
+                    judged.hidden_size_mm.extend(
+                        1000 * abs(m - t) for m, t in zip(box.size[:2], sides, strict=True)
+                    )
                 if height_error > 0.01:
                     judged.notes.append(
                         f"box {nearest} (partly hidden) height {box.size[2]:.3f}, true "
