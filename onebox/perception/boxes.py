@@ -886,7 +886,7 @@ HUG_SHARE = 0.85
 """A partly hidden top counts as a rectangle only if this share of its row ends seen (not
 hidden, not next to dropout) lies within ``HUG_FOOTPRINTS`` of its rectangle's sides ..."""
 HUG_FOOTPRINTS = 2.5
-SIDE_SEEN_SHARE = 0.12
+SIDE_SEEN_SHARE = 0.05
 """... and each of its four sides is seen (outline points within that band of it, not hidden)
 along at least this share of its length."""
 
