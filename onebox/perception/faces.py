@@ -243,18 +243,21 @@ def _seams(
 ) -> tuple[Float64Array, Float64Array, BoolArray]:
     """Going down each line (rows): the first point where the face's points above (all of
     them) are of one even shade and the RUN below of another, SEAM_STEP or more apart (RUN_OF
-    of RUN points on the face on either side, SEAM_GAP points between them left out); the
-    heights just below and just above it, and whether the line has one."""
+    of RUN points on the face on either side, SEAM_GAP points between them left out), and at
+    most one of the 2 RUN below is of the shade above again; the heights just below and just
+    above it, and whether the line has one."""
     rows, samples = on.shape
     shade = np.where(on, grey, np.nan)
     # Means by running sums, spreads by fmax/fmin (no warnings on windows with no point).
     # A box's face above the seam as long as two runs at least (a dark rim under a top's
-    # edge is no box).
-    k = np.arange(2 * RUN, samples - RUN - SEAM_GAP + 1)
+    # edge is no box); below it, the face does not come back to the shade above within two
+    # runs (a face seen nearly edge-on catches a few pixels of another shade, then its own).
+    k = np.arange(2 * RUN, samples - 2 * RUN - SEAM_GAP + 1)
     if rows == 0 or len(k) == 0:
         empty = np.zeros(rows)
         return empty, empty, np.zeros(rows, dtype=bool)
     windows = np.lib.stride_tricks.sliding_window_view(shade, RUN, axis=1)
+    longer = np.lib.stride_tricks.sliding_window_view(shade, 2 * RUN, axis=1)
     zero = np.zeros((rows, 1))
     c_valid = np.concatenate([zero, np.cumsum(on, axis=1)], axis=1)
     c_shade = np.concatenate([zero, np.cumsum(np.where(on, grey, 0.0), axis=1)], axis=1)
@@ -270,6 +273,8 @@ def _seams(
     n_below, b_mid = window(k + SEAM_GAP)
     below = windows[:, k + SEAM_GAP]
     b_span = np.fmax.reduce(below, axis=2) - np.fmin.reduce(below, axis=2)
+    with np.errstate(invalid="ignore"):
+        back = np.abs(longer[:, k + SEAM_GAP] - a_mid[..., np.newaxis]) < SEAM_STEP / 2
     # The whole face above, from just under the top's edge (whose pixels blend with the top),
     # is one shade: a face shaded from light to dark has no seam to tell.
     lit = shade[:, SEAM_GAP:]
@@ -277,7 +282,11 @@ def _seams(
     with np.errstate(invalid="ignore"):
         even = (spread[:, k - 1 - SEAM_GAP] < SEAM_STEP / 2) & (b_span < SEAM_STEP / 2)
         is_seam = (
-            (n_above >= RUN_OF) & (n_below >= RUN_OF) & even & (np.abs(a_mid - b_mid) >= SEAM_STEP)
+            (n_above >= RUN_OF)
+            & (n_below >= RUN_OF)
+            & even
+            & (np.abs(a_mid - b_mid) >= SEAM_STEP)
+            & (back.sum(axis=2) <= 1)
         )
     seam: BoolArray = np.any(is_seam, axis=1)
     pick = np.argmax(is_seam, axis=1)
