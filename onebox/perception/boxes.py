@@ -406,7 +406,7 @@ def _plateaus(
     band = np.zeros(tops_n, dtype=bool)
     if colour_cut is not None:
         pixels = np.bincount(lab, minlength=count + 1)
-        band = _bands(labels, h, big, pixels, float(np.nanmin(d)) / lens.fx)
+        band = _bands(labels, h, d, big, pixels, lens, support, (r0 - PAD, c0 - PAD))
     in_band = band[p_top]
     seated = on_level & ~in_band
     top_flat[p_idx[seated]] = p_top[seated] + 1
@@ -421,6 +421,13 @@ def _plateaus(
         alone = band & (taken == 0)
         back = alone[p_top] & on_level
         top_flat[p_idx[back]] = p_top[back] + 1
+        if back.any():
+            # ... and grows back into its own cut pixels (those of a narrow top seen at a
+            # slant, a few pixels high between the colour edges of its rims); no other top
+            # grows again.
+            own_level = np.where(alone, level, np.nan)
+            rest = candidates[top_flat[candidates] == 0]
+            _grow(top_flat, rest, h_flat, own_level, below, width_p, None, reach)
     tops = _Tops.gather(top_lab, tops_n, PAD, (r0, c0))
     labels_top[crop] = top_lab[PAD:-PAD, PAD:-PAD]
     plateaus = _measure_all(
@@ -502,42 +509,81 @@ def _levels(
 def _bands(
     labels: npt.NDArray[np.int32],
     h: Float32Array,
+    d: Float32Array,
     big: npt.NDArray[np.intp],
     counts: npt.NDArray[np.intp],
-    footprint_m: float,
+    lens: Intrinsics,
+    support: Support,
+    origin: tuple[int, int],
 ) -> BoolArray:
     """Which tops (pieces ``big``, in order) are only bands: a seam's dark line between two
     cartons, cut out along both sides by colour edges. Nothing of a band is left once it
-    shrinks by a few pixels (BAND_M), and it runs along a carton's side, many times longer
-    than it is wide (a short thin piece is a strip of something else, such as a box mostly
-    hidden under another). A pixel with no reading is no edge: dropout does not thin a top."""
-    k = min(max(math.ceil(BAND_M / max(footprint_m, 1e-6)), 2), BAND_MAX_PX)
+    shrinks by BAND_M (in metres on the plane the piece lies in: a camera seeing it at a
+    slant sees its pixels longer down the picture than across), and it runs along a carton's
+    side, many times longer than it is wide (a short thin piece is a strip of something else,
+    such as a box mostly hidden under another). A pixel with no reading is no edge: dropout
+    does not thin a top. ``origin``: the picture's row and column of ``labels``' first."""
     band = np.zeros(len(big), dtype=bool)
     slices = ndimage.find_objects(labels)
     rows_n, cols_n = labels.shape
+    normal = np.asarray(support.normal_camera, dtype=np.float64)
     for t, piece in enumerate(big):
         where = slices[piece - 1]
         if where is None:
             continue
         tall, wide = where[0].stop - where[0].start, where[1].stop - where[1].start
+        k_rows, k_cols = _band_pixels(
+            (where[0].start + where[0].stop - 1) / 2 + origin[0],
+            (where[1].start + where[1].stop - 1) / 2 + origin[1],
+            d[where][labels[where] == piece],
+            normal,
+            lens,
+        )
         # A band holds at most 2k pixels across its length; seams round and between cartons
         # join in rings and grids, up to about twice round their bounding box.
-        if max(tall, wide) < 8 * k or counts[piece] > 3 * k * (tall + wide):
+        if max(tall / k_rows, wide / k_cols) < 8 or counts[piece] > 3 * (
+            k_cols * tall + k_rows * wide
+        ):
             continue
         rs = slice(max(where[0].start - 1, 0), min(where[0].stop + 1, rows_n))
         cs = slice(max(where[1].start - 1, 0), min(where[1].stop + 1, cols_n))
         alive = (labels[rs, cs] == piece) | np.isnan(h[rs, cs])
-        for _ in range(k):
+        for step in range(max(k_rows, k_cols)):
             core = alive.copy()
-            core[:, :-1] &= alive[:, 1:]
-            core[:, 1:] &= alive[:, :-1]
-            core[:-1] &= alive[1:]
-            core[1:] &= alive[:-1]
+            if step < k_cols:
+                core[:, :-1] &= alive[:, 1:]
+                core[:, 1:] &= alive[:, :-1]
+            if step < k_rows:
+                core[:-1] &= alive[1:]
+                core[1:] &= alive[:-1]
             core[[0, -1], :] = False
             core[:, [0, -1]] = False
             alive = core
         band[t] = not (alive & (labels[rs, cs] == piece)).any()
     return band
+
+
+def _band_pixels(
+    row: float, col: float, depths: Float32Array, normal: Float64Array, lens: Intrinsics
+) -> tuple[int, int]:
+    """How many pixels down and across make BAND_M on a plane parallel to the support at the
+    pixel (row, col) and the median of ``depths`` (2 to BAND_MAX_PX)."""
+    depth = float(np.nanmedian(depths)) if len(depths) else math.nan
+    if not math.isfinite(depth) or depth <= 0:
+        return 2, 2
+
+    def ray(r: float, c: float) -> Float64Array:
+        return np.array([(c - lens.cx) / lens.fx, (r - lens.cy) / lens.fy, 1.0])
+
+    here = ray(row, col) * depth
+    level = float(normal @ here)
+    steps = []
+    for r, c in ((row + 1.0, col), (row, col + 1.0)):
+        other = ray(r, c)
+        along = float(normal @ other)
+        metres = float(np.linalg.norm(other * (level / along) - here)) if along else math.inf
+        steps.append(min(max(math.ceil(BAND_M / max(metres, 1e-6)), 2), BAND_MAX_PX))
+    return steps[0], steps[1]
 
 
 def _grow(
