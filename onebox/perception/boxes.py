@@ -403,10 +403,20 @@ def _plateaus(
     small = np.zeros(count + 1, dtype=bool)
     small[1:] = areas[1:] < least
     candidates = np.concatenate([np.flatnonzero(stand.reshape(-1) & (flat == 0)), idx[small[lab]]])
-    band = np.zeros(tops_n, dtype=bool)
+    band = ring = np.zeros(tops_n, dtype=bool)
     if colour_cut is not None:
         pixels = np.bincount(lab, minlength=count + 1)
-        band = _bands(labels, h, d, big, pixels, lens, support, (r0 - PAD, c0 - PAD))
+        band, ring = _bands(
+            labels,
+            h,
+            d,
+            big,
+            pixels,
+            float(np.nanmin(d)) / lens.fx,
+            lens,
+            support,
+            (r0 - PAD, c0 - PAD),
+        )
     in_band = band[p_top]
     seated = on_level & ~in_band
     top_flat[p_idx[seated]] = p_top[seated] + 1
@@ -421,11 +431,12 @@ def _plateaus(
         alone = band & (taken == 0)
         back = alone[p_top] & on_level
         top_flat[p_idx[back]] = p_top[back] + 1
-        if back.any():
-            # ... and grows back into its own cut pixels (those of a narrow top seen at a
-            # slant, a few pixels high between the colour edges of its rims); no other top
+        if (alone & ~ring).any():
+            # ... and one that runs round no other top grows back into its own cut pixels
+            # (those of a narrow top seen at a slant, a few pixels high between the colour
+            # edges of its rims; a ring of seams round cartons would fill in); no other top
             # grows again.
-            own_level = np.where(alone, level, np.nan)
+            own_level = np.where(alone & ~ring, level, np.nan)
             rest = candidates[top_flat[candidates] == 0]
             _grow(top_flat, rest, h_flat, own_level, below, width_p, None, reach)
     tops = _Tops.gather(top_lab, tops_n, PAD, (r0, c0))
@@ -512,18 +523,25 @@ def _bands(
     d: Float32Array,
     big: npt.NDArray[np.intp],
     counts: npt.NDArray[np.intp],
+    footprint_m: float,
     lens: Intrinsics,
     support: Support,
     origin: tuple[int, int],
-) -> BoolArray:
-    """Which tops (pieces ``big``, in order) are only bands: a seam's dark line between two
+) -> tuple[BoolArray, BoolArray]:
+    """Which tops (pieces ``big``, in order) are only bands, and which of those bands run
+    round another top (their bounding box holds some of it): a seam's dark line between two
     cartons, cut out along both sides by colour edges. Nothing of a band is left once it
-    shrinks by BAND_M (in metres on the plane the piece lies in: a camera seeing it at a
-    slant sees its pixels longer down the picture than across), and it runs along a carton's
-    side, many times longer than it is wide (a short thin piece is a strip of something else,
-    such as a box mostly hidden under another). A pixel with no reading is no edge: dropout
-    does not thin a top. ``origin``: the picture's row and column of ``labels``' first."""
+    shrinks by a few pixels (BAND_M at ``footprint_m``; fewer along the line of sight where a
+    camera sees the piece at a slant: its pixels are longer that way), and it runs along a
+    carton's side, many times longer than it is wide (a short thin piece is a strip of
+    something else, such as a box mostly hidden under another). A pixel with no reading is
+    no edge: dropout does not thin a top. ``origin``: the picture's row and column of
+    ``labels``' first."""
+    k = min(max(math.ceil(BAND_M / max(footprint_m, 1e-6)), 2), BAND_MAX_PX)
     band = np.zeros(len(big), dtype=bool)
+    ring = np.zeros(len(big), dtype=bool)
+    is_big = np.zeros(len(counts), dtype=bool)
+    is_big[big] = True
     slices = ndimage.find_objects(labels)
     rows_n, cols_n = labels.shape
     normal = np.asarray(support.normal_camera, dtype=np.float64)
@@ -538,6 +556,7 @@ def _bands(
             d[where][labels[where] == piece],
             normal,
             lens,
+            k,
         )
         # A band holds at most 2k pixels across its length; seams round and between cartons
         # join in rings and grids, up to about twice round their bounding box.
@@ -560,30 +579,42 @@ def _bands(
             core[:, [0, -1]] = False
             alive = core
         band[t] = not (alive & (labels[rs, cs] == piece)).any()
-    return band
+        inside = labels[where]
+        ring[t] = band[t] and bool((is_big[inside] & (inside != piece)).any())
+    return band, ring
 
 
 def _band_pixels(
-    row: float, col: float, depths: Float32Array, normal: Float64Array, lens: Intrinsics
+    row: float,
+    col: float,
+    depths: Float32Array,
+    normal: Float64Array,
+    lens: Intrinsics,
+    pixels: int,
 ) -> tuple[int, int]:
-    """How many pixels down and across make BAND_M on a plane parallel to the support at the
-    pixel (row, col) and the median of ``depths`` (2 to BAND_MAX_PX)."""
+    """How many pixels down and across a band's shrinking takes: ``pixels`` along the
+    picture's shorter step on a plane parallel to the support at the pixel (row, col) and the
+    median of ``depths``, fewer along the longer (a top seen at a slant: its rows are longer
+    along the line of sight than its columns across it), at least 2."""
     depth = float(np.nanmedian(depths)) if len(depths) else math.nan
     if not math.isfinite(depth) or depth <= 0:
-        return 2, 2
+        return pixels, pixels
 
     def ray(r: float, c: float) -> Float64Array:
         return np.array([(c - lens.cx) / lens.fx, (r - lens.cy) / lens.fy, 1.0])
 
     here = ray(row, col) * depth
     level = float(normal @ here)
-    steps = []
+    metres = []
     for r, c in ((row + 1.0, col), (row, col + 1.0)):
         other = ray(r, c)
         along = float(normal @ other)
-        metres = float(np.linalg.norm(other * (level / along) - here)) if along else math.inf
-        steps.append(min(max(math.ceil(BAND_M / max(metres, 1e-6)), 2), BAND_MAX_PX))
-    return steps[0], steps[1]
+        metres.append(float(np.linalg.norm(other * (level / along) - here)) if along else 0.0)
+    shortest = min(metres)
+    if not shortest > 0:
+        return pixels, pixels
+    down, across = (max(math.ceil(pixels * shortest / m), 2) for m in metres)
+    return down, across
 
 
 def _grow(
