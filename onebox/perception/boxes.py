@@ -403,7 +403,8 @@ def _plateaus(
     small = np.zeros(count + 1, dtype=bool)
     small[1:] = areas[1:] < least
     candidates = np.concatenate([np.flatnonzero(stand.reshape(-1) & (flat == 0)), idx[small[lab]]])
-    band = ring = np.zeros(tops_n, dtype=bool)
+    band = np.zeros(tops_n, dtype=bool)
+    ring = np.zeros(tops_n, dtype=bool)
     if colour_cut is not None:
         pixels = np.bincount(lab, minlength=count + 1)
         band, ring = _bands(
@@ -804,7 +805,9 @@ def _measure_all(
     extreme[0] = extreme[-1] = True
     extreme[change] = True
     extreme[change + 1] = True
-    e_level = level[e_top] + np.maximum(1.5 * tol[e_top], 0.005)
+    # Above this a surface rises over a top (something stands on or in front of it).
+    over = level + np.maximum(1.5 * tol, 0.005)
+    e_level = over[e_top]
     hidden = np.zeros(len(edge), dtype=bool)
     unsure = np.zeros(len(edge), dtype=bool)
     # Drop: past the pixel the surface is seen well below the top: a real edge, not a shadow.
@@ -935,7 +938,7 @@ def _measure_all(
                 float(footprint[t]),
                 float(whole_area[t]),
                 float(level[t]),
-                float(level[t] + max(1.5 * tol[t], 0.005)),
+                float(over[t]),
                 top_flat,
                 h_flat,
                 tops,
@@ -993,10 +996,10 @@ def _seen_fill(
     The rectangle is the extreme outline points' (plus a footprint), as for the plain fill.
     Each crop pixel whose ray meets the top's plane inside it counts with its area there;
     those whose reading rises above the top (``rise_m``) are hidden and left out."""
-    ax = np.asarray(rect.axis)
-    perp = np.array([-ax[1], ax[0]])
     if rect.hidden_sides or ends.sum() < 8:
         return 0.0
+    ax = np.asarray(rect.axis)
+    perp = np.array([-ax[1], ax[0]])
     # The outline seen must lie on the fitted rectangle's sides ...
     local = points - np.asarray(rect.middle)
     u, w = local @ ax, local @ perp
