@@ -24,7 +24,7 @@ import logging
 import os
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
@@ -738,6 +738,11 @@ def written_whole(destination: Path) -> Iterator[Path]:
             partial.unlink()
         raise
     os.replace(partial, destination)
+
+
+def counted(counts: Mapping[str, int]) -> str:
+    """``a (3), b (1)``: names with their counts, sorted by name, for a one-line summary."""
+    return ", ".join(f"{name} ({n})" for name, n in sorted(counts.items()))
 
 
 class Progress:

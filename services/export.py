@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from onebox import export, settings
-from onebox.recording import Progress
+from onebox.recording import Progress, counted
 
 log = logging.getLogger("export")
 
@@ -75,10 +75,10 @@ def main(args: argparse.Namespace) -> int:
     for topic, count in sorted(result.topics.items()):
         print(f"  {topic:<28} {count:>6} messages")
     if result.left_out:
-        listed = ", ".join(f"{k} ({n})" for k, n in sorted(result.left_out.items()))
+        listed = counted(result.left_out)
         print(f"  left out, no {s.to} counterpart: {listed}")
     if result.bad:
-        listed = ", ".join(f"{k} ({n})" for k, n in sorted(result.bad.items()))
+        listed = counted(result.bad)
         print(f"  left out, not convertible: {listed}")
     print(f"export: wrote {s.destination} ({s.to}): {result.written} messages")
     return 0

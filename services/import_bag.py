@@ -31,7 +31,7 @@ import logging
 from pathlib import Path
 
 from onebox import ros_bag
-from onebox.recording import Progress
+from onebox.recording import Progress, counted
 
 log = logging.getLogger("import")
 
@@ -85,10 +85,10 @@ def main(args: argparse.Namespace) -> int:
     for key, count in sorted(result.written.items()):
         print(f"  {key:<24} {count:>6} messages")
     if result.left_out:
-        listed = ", ".join(f"{t} ({n})" for t, n in sorted(result.left_out.items()))
+        listed = counted(result.left_out)
         print(f"  left out: {listed}")
     if result.bad:
-        listed = ", ".join(f"{t} ({n})" for t, n in sorted(result.bad.items()))
+        listed = counted(result.bad)
         print(f"  left out, damaged: {listed}")
     if result.distorted:
         log.info(
