@@ -551,6 +551,9 @@ def _bands(
         if where is None:
             continue
         tall, wide = where[0].stop - where[0].start, where[1].stop - where[1].start
+        # Neither count is under 2 or over k: most pieces are plainly no band whatever they are.
+        if max(tall, wide) < 16 or counts[piece] > 3 * k * (tall + wide):
+            continue
         k_rows, k_cols = _band_pixels(
             (where[0].start + where[0].stop - 1) / 2 + origin[0],
             (where[1].start + where[1].stop - 1) / 2 + origin[1],
@@ -688,9 +691,14 @@ class _Tops:
         starts = np.concatenate(([0], np.cumsum(counts)[:-1]))
         rows, cols = np.divmod(flat, width)
         row_fill = _spans(top, rows, cols, count)
-        flat_t, top_t = _grouped(top_lab.T.reshape(-1), count)
-        cols_t, rows_t = np.divmod(flat_t, top_lab.shape[0])
-        col_fill = _spans(top_t, cols_t, rows_t, count)
+        # Per top and column, its first and last row.
+        column = top.astype(np.intp) * width + cols
+        first = np.full(count * width, top_lab.shape[0], dtype=np.intp)
+        last = np.full(count * width, -1, dtype=np.intp)
+        np.minimum.at(first, column, rows)
+        np.maximum.at(last, column, rows)
+        spans = np.maximum(last - first + 1, 0).reshape(count, width)
+        col_fill = spans.sum(axis=1).astype(np.float64)
         shift = (origin[0] - pad, origin[1] - pad)
         return cls(
             flat,
