@@ -54,6 +54,10 @@ SEAM_STEP = 8.0
 """The least brightness step (0..255) down a face between two boxes' faces."""
 SEAM_GAP = 2
 """Points skipped between the shades above and below a seam (pixels blended across it)."""
+SEAM_MIN_PX = 16.0
+"""A line that spans fewer pixels from the top to the surface shows no seam: each pixel of a
+face seen that steeply spans too much of its height (a box on another measured 12-23 mm short
+from a rim's step on a face 10-13 pixels long)."""
 
 
 @dataclass(frozen=True)
@@ -141,6 +145,9 @@ def face_bottoms(
     else:
         s_low = s_high = np.zeros(len(low))
         seam = np.zeros(len(low), dtype=bool)
+    # Each pixel of a face seen steeply spans much of its height: a shade's step there is no
+    # sure height (the face's plane a pixel off moves it by a pixel's height).
+    seam &= span_px[box_of, side_of, line_of] >= SEAM_MIN_PX
     if seam.any():
         # A seam between two boxes runs level across the side: another line of the same side
         # sees it within a point's spacing (an edge across the face at a slant is no seam).
