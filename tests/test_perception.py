@@ -573,3 +573,64 @@ def test_a_narrow_top_seen_at_a_slant_keeps_its_width(tilt_deg):
     assert found.boxes[0].size[0] == pytest.approx(0.08, abs=0.004)
     assert found.boxes[0].size[1] == pytest.approx(0.04, abs=0.004)
     assert found.boxes[0].size[2] == pytest.approx(0.06, abs=0.001)
+
+
+def _standing_at(z: float, x: float, y: float, size, yaw_deg: float, colour) -> Box:
+    """A box standing at height ``z`` with its top's middle over (x, y)."""
+    return box_on(Plane(point=(0.0, 0.0, z)), x, y, size, yaw_deg, colour)
+
+
+@pytest.mark.parametrize("sigma_m", [0.0, 0.001])
+def test_a_box_overhanging_the_corner_of_the_one_under_it_stands_on_it(sigma_m):
+    """A small box stands near a corner of a larger one and overhangs it there: past two of
+    its sides, meeting at a corner, the camera sees the lower top on every probe line; past
+    the other two, the table. Those are two sides of the top whose rectangle holds the box's
+    middle, so the box stands on it (the finder before measured it from the table: 146 mm
+    for 68)."""
+    lower = box_on(Plane(), 0.0, 0.14, (0.2241, 0.1226, 0.0778), 52.77, (184, 103, 195))
+    upper = _standing_at(0.0778, 0.0048, 0.1659, (0.0862, 0.07, 0.0681), -36.53, (64, 121, 208))
+    camera = Camera.tilted(0.9, 26.4, width=640, height=480)
+    depth, colour = render(Scene(camera, Plane(), (lower, upper)))
+    if sigma_m:
+        depth = add_noise(depth, Noise(sigma_m=sigma_m), np.random.default_rng(5))
+    found = find_boxes(depth, camera.lens, camera.camera_to_world, colour)
+    top = max(found.boxes, key=lambda b: b.top_middle[2])
+    assert top.top_middle[2] == pytest.approx(0.1459, abs=0.002)
+    assert top.size[2] == pytest.approx(0.0681, abs=0.003)
+
+
+def test_a_face_seen_nearly_edge_on_shows_no_seam_under_a_box_on_another():
+    """A camera almost straight down sees a stacked box's faces 10-13 pixels long from its
+    top to the table; the dark rim's step on them read as a seam between two boxes flush,
+    12-23 mm over the lower top (the box 33 mm tall for 45). A line that short shows no
+    seam now: the box is measured from the lower top seen round it."""
+    lower = box_on(Plane(), -0.15, -0.1, (0.217, 0.1536, 0.0766), -29.79, (171, 188, 207))
+    upper = _standing_at(0.0766, -0.1453, -0.0892, (0.0806, 0.0667, 0.045), -3.88, (201, 209, 214))
+    camera = Camera.tilted(0.9, 3.68, width=640, height=480)
+    depth, colour = render(Scene(camera, Plane(), (lower, upper)))
+    found = find_boxes(depth, camera.lens, camera.camera_to_world, colour)
+    top = max(found.boxes, key=lambda b: b.top_middle[2])
+    assert top.size[2] == pytest.approx(0.045, abs=0.002)
+
+
+@pytest.mark.parametrize("sigma_m", [0.0, 0.001])
+def test_a_box_between_lower_ones_touching_it_stands_on_the_table(sigma_m):
+    """Cartons turned 45 degrees packed edge to edge: one 11 mm taller than the two it
+    touches. Their tops seen just past its sides are a ledge at their height, but they stand
+    beside it (touching, not reaching under it): no sign of what it stands on (the finder
+    before measured it 11 mm tall, standing on them)."""
+    d = 0.1 * math.sqrt(2)
+    colours = ((208, 130, 141), (197, 106, 106), (192, 198, 229))
+    boxes = [
+        box_on(Plane(), (k - 1) * d, 0.0, (0.1, 0.1, 0.0607), 45.0, colours[k]) for k in range(3)
+    ]
+    boxes.append(box_on(Plane(), -d / 2, d / 2, (0.1, 0.1, 0.0718), 45.0, (78, 212, 202)))
+    boxes.append(box_on(Plane(), d / 2, d / 2, (0.1, 0.1, 0.0599), 45.0, (153, 111, 63)))
+    camera = Camera.tilted(0.8, 6.36, width=640, height=480)
+    depth, colour = render(Scene(camera, Plane(), tuple(boxes)))
+    if sigma_m:
+        depth = add_noise(depth, Noise(sigma_m=sigma_m), np.random.default_rng(3))
+    found = find_boxes(depth, camera.lens, camera.camera_to_world, colour)
+    tall = max(found.boxes, key=lambda b: b.top_middle[2])
+    assert tall.top_middle[2] == pytest.approx(0.0718, abs=0.002)
+    assert tall.size[2] == pytest.approx(0.0718, abs=0.002)

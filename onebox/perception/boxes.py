@@ -1422,6 +1422,19 @@ def _reaches_under(
     return False
 
 
+def _holds_middle(lower: _Plateau, upper: _Plateau) -> bool:
+    """Whether the lower top's rectangle holds the upper box's middle."""
+    if lower.rect is None or upper.rect is None:
+        return False
+    ax0, ax1 = lower.rect.axis
+    rx = upper.rect.middle[0] - lower.rect.middle[0]
+    ry = upper.rect.middle[1] - lower.rect.middle[1]
+    return (
+        abs(rx * ax0 + ry * ax1) <= lower.rect.length_m / 2
+        and abs(ry * ax0 - rx * ax1) <= lower.rect.width_m / 2
+    )
+
+
 def _half_extent(rect: Rectangle, d0: float, d1: float) -> float:
     """Half a rectangle's extent along the unit direction (d0, d1)."""
     a0, a1 = rect.axis
@@ -1553,8 +1566,30 @@ def _bases(
     # seen past the box's side face (the box overhangs it, or stands off its middle, past the
     # other sides). A whole box's top beside the box is no sign of what it stands on.
     sides_seen = ((side_match >= 1) & (side_match >= side_lower)).sum(axis=1)
-    partial = np.array([level is None or not level.is_box for level in levels])
-    across[pair_l, pair_b] |= (sides_seen >= 2) & (side_match.sum(axis=1) >= 3) & partial[pair_l]
+    # A box's ledge at the height of a box standing beside it (touching, not reaching under
+    # it) is that box's top seen past the seam between them: no more a sign than the top.
+    beside = np.zeros(len(levels), dtype=bool)
+    for row in np.flatnonzero(owner >= 0):
+        box = boxes[owner[row]]
+        beside[row] = any(
+            p.is_box
+            and p is not box
+            and abs(p.height_m - level_h[row]) < level_tol[row]
+            and _touch(p, box)
+            and not _reaches_under(p, box)
+            for p in plateaus
+        )
+    partial = np.array([level is None or not level.is_box for level in levels]) & ~beside
+    partial = partial[pair_l]
+    across[pair_l, pair_b] |= (sides_seen >= 2) & (side_match.sum(axis=1) >= 3) & partial
+    # ... or a top seen on every line of two sides that meet, whose rectangle holds the box's
+    # middle: the box overhangs its corner, and past its other two sides lies lower.
+    whole = side_match >= len(PROBE_FRACTIONS)
+    corner = (whole[:, 0] | whole[:, 1]) & (whole[:, 2] | whole[:, 3])
+    for k in np.flatnonzero(corner):
+        level = levels[pair_l[k]]
+        if level is not None and _holds_middle(level, boxes[pair_b[k]]):
+            across[pair_l[k], pair_b[k]] = True
     seen_ok = allowed & (matches >= 2) & ((matches >= 0.75 * (matches + lowers)) | across)
     # A top seen as a strip beside the box, the box right across the strip's hidden side
     # (a small carton turned across a larger one): past the box's other sides lies lower.
@@ -1564,7 +1599,7 @@ def _bases(
             seen_ok[j, i] = True
     # A ledge found right past the box's own outline needs less: a rim of the box under it is
     # often narrower than the foot's probe along some sides (the upper box turned on it).
-    own_ok = (owner[:, np.newaxis] >= 0) & (matches >= 3)
+    own_ok = (owner[:, np.newaxis] >= 0) & ~beside[:, np.newaxis] & (matches >= 3)
     own_ok &= matches >= 0.5 * (matches + foot_lowers)
     # ... or seen on every line of one side, when no top beside is at its height: the rim of
     # a box underneath that the upper one overhangs on its other sides.
