@@ -1422,19 +1422,6 @@ def _reaches_under(
     return False
 
 
-def _holds_middle(lower: _Plateau, upper: _Plateau) -> bool:
-    """Whether the lower top's rectangle holds the upper box's middle."""
-    if lower.rect is None or upper.rect is None:
-        return False
-    ax0, ax1 = lower.rect.axis
-    rx = upper.rect.middle[0] - lower.rect.middle[0]
-    ry = upper.rect.middle[1] - lower.rect.middle[1]
-    return (
-        abs(rx * ax0 + ry * ax1) <= lower.rect.length_m / 2
-        and abs(ry * ax0 - rx * ax1) <= lower.rect.width_m / 2
-    )
-
-
 def _half_extent(rect: Rectangle, d0: float, d1: float) -> float:
     """Half a rectangle's extent along the unit direction (d0, d1)."""
     a0, a1 = rect.axis
@@ -1588,7 +1575,7 @@ def _bases(
     corner = (whole[:, 0] | whole[:, 1]) & (whole[:, 2] | whole[:, 3])
     for k in np.flatnonzero(corner):
         level = levels[pair_l[k]]
-        if level is not None and _holds_middle(level, boxes[pair_b[k]]):
+        if level is not None and level.rect is not None and _inside(level, boxes[pair_b[k]]):
             across[pair_l[k], pair_b[k]] = True
     seen_ok = allowed & (matches >= 2) & ((matches >= 0.75 * (matches + lowers)) | across)
     # A top seen as a strip beside the box, the box right across the strip's hidden side
