@@ -690,15 +690,8 @@ class _Tops:
         counts = np.bincount(top, minlength=count)
         starts = np.concatenate(([0], np.cumsum(counts)[:-1]))
         rows, cols = np.divmod(flat, width)
-        row_fill = _spans(top, rows, cols, count)
-        # Per top and column, its first and last row.
-        column = top.astype(np.intp) * width + cols
-        first = np.full(count * width, top_lab.shape[0], dtype=np.intp)
-        last = np.full(count * width, -1, dtype=np.intp)
-        np.minimum.at(first, column, rows)
-        np.maximum.at(last, column, rows)
-        spans = np.maximum(last - first + 1, 0).reshape(count, width)
-        col_fill = spans.sum(axis=1).astype(np.float64)
+        row_fill = _spans(top, rows, cols, count, top_lab.shape[0])
+        col_fill = _spans(top, cols, rows, count, width)
         shift = (origin[0] - pad, origin[1] - pad)
         return cls(
             flat,
@@ -726,17 +719,22 @@ def _grouped(
 
 
 def _spans(
-    top: npt.NDArray[np.int32], lines: npt.NDArray[np.intp], along: npt.NDArray[np.intp], count: int
+    top: npt.NDArray[np.int32],
+    lines: npt.NDArray[np.intp],
+    along: npt.NDArray[np.intp],
+    count: int,
+    lines_n: int,
 ) -> Float64Array:
-    """Per top, the pixels from the first to the last of each line (row or column), summed:
-    the top's area with the holes in it (noise, a box standing on it) filled."""
-    key = top.astype(np.int64) * (int(lines.max()) + 1) + lines
-    first = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
-    last = np.r_[first[1:] - 1, len(key) - 1]
-    spans = (along[last] - along[first] + 1).astype(np.float64)
-    result: Float64Array = np.bincount(top[first], weights=spans, minlength=count).astype(
-        np.float64
-    )
+    """Per top, the pixels from the first to the last of each line (row or column, of
+    ``lines_n``), summed: the top's area with the holes in it (noise, a box standing on it)
+    filled. One pass over the pixels, whatever their order."""
+    key = top.astype(np.intp) * lines_n + lines
+    first = np.full(count * lines_n, np.iinfo(np.intp).max, dtype=np.intp)
+    last = np.full(count * lines_n, -1, dtype=np.intp)
+    np.minimum.at(first, key, along)
+    np.maximum.at(last, key, along)
+    spans = np.maximum(last - first + 1, 0).reshape(count, lines_n)
+    result: Float64Array = spans.sum(axis=1).astype(np.float64)
     return result
 
 

@@ -147,7 +147,8 @@ def face_bottoms(
         seam = np.zeros(len(low), dtype=bool)
     # Each pixel of a face seen steeply spans much of its height: a shade's step there is no
     # sure height (the face's plane a pixel off moves it by a pixel's height).
-    seam &= span_px[box_of, side_of, line_of] >= SEAM_MIN_PX
+    px = span_px[box_of, side_of, line_of]
+    seam &= px >= SEAM_MIN_PX
     if seam.any():
         # A seam between two boxes runs level across the side: another line of the same side
         # sees it within a point's spacing (an edge across the face at a slant is no seam).
@@ -156,7 +157,6 @@ def face_bottoms(
         for j in np.flatnonzero(seam):
             twins = seam & (side_key == side_key[j]) & (np.abs(s_high - s_high[j]) <= spacing[j])
             seam[j] = np.count_nonzero(twins) >= 2
-    px = span_px[box_of, side_of, line_of]
     # Each point is read at the pixel it falls in, whose ray meets the face up to half a
     # pixel's height away.
     half_px = 0.5 * heights[box_of, 0] / px
