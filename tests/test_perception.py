@@ -8,8 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from onebox.perception.boxes import BoxFinder, FinderSettings, find_boxes
-from onebox.perception.support import fit_support
+from onebox.geometry import Intrinsics
+from onebox.perception.boxes import BoxFinder, FinderSettings, _bands, find_boxes
+from onebox.perception.support import Support, fit_support
 from onebox.testing.judged import yaw_error
 from onebox.testing.raycast import (
     Box,
@@ -634,3 +635,28 @@ def test_a_box_between_lower_ones_touching_it_stands_on_the_table(sigma_m):
     tall = max(found.boxes, key=lambda b: b.top_middle[2])
     assert tall.top_middle[2] == pytest.approx(0.0718, abs=0.002)
     assert tall.size[2] == pytest.approx(0.0718, abs=0.002)
+
+
+def test_noise_holes_do_not_make_a_narrow_top_a_band():
+    """The seam test shrinks a piece between colour edges by 5 mm from each side (5 pixels
+    where the nearest reading is 0.6 m away): nothing left, it is a band (a seam's dark
+    line). A narrow top 12 pixels wide, pitted by noise (lone pixels cut by a height step of
+    a few sigma), shrank from every pit as from an edge and was taken for a
+    band; a pixel whose neighbours are three of them the piece is no edge. A band 4 pixels
+    wide, pitted the same, is still one."""
+    lens = Intrinsics(554.0, 554.0, 319.5, 239.5)
+    support = Support((0.0, 0.0, 1.0), 0.0, 1.0, None, "camera", offset_camera_m=1.0)
+    rng = np.random.default_rng(3)
+    for across, band in ((12, False), (4, True)):
+        labels = np.zeros((40, 200), dtype=np.int32)
+        labels[10 : 10 + across, 20:180] = 1
+        pits = (rng.random(labels.shape) < 0.12) & (labels == 1)
+        pits[10] = pits[9 + across] = False  # the outline stays: only lone pixels inside
+        labels[pits] = 0
+        h = np.full(labels.shape, 0.1, dtype=np.float32)
+        d = np.full(labels.shape, 1.0, dtype=np.float32)
+        counts = np.bincount(labels.reshape(-1), minlength=2)
+        found, _ = _bands(
+            labels, h, d, np.array([1]), counts, 0.6 / lens.fx, lens, support, (220, 120)
+        )
+        assert bool(found[0]) is band

@@ -536,7 +536,8 @@ def _bands(
     camera sees the piece at a slant: its pixels are longer that way), and it runs along a
     carton's side, many times longer than it is wide (a short thin piece is a strip of
     something else, such as a box mostly hidden under another). A pixel with no reading is
-    no edge: dropout does not thin a top. ``origin``: the picture's row and column of
+    no edge: dropout does not thin a top; nor is a lone pixel cut out of the piece by noise
+    (three of its four neighbours are the piece). ``origin``: the picture's row and column of
     ``labels``' first."""
     k = min(max(math.ceil(BAND_M / max(footprint_m, 1e-6)), 2), BAND_MAX_PX)
     band = np.zeros(len(big), dtype=bool)
@@ -570,7 +571,13 @@ def _bands(
             continue
         rs = slice(max(where[0].start - 1, 0), min(where[0].stop + 1, rows_n))
         cs = slice(max(where[1].start - 1, 0), min(where[1].stop + 1, cols_n))
-        alive = (labels[rs, cs] == piece) | np.isnan(h[rs, cs])
+        mine = labels[rs, cs] == piece
+        around = np.zeros(mine.shape, dtype=np.int8)
+        around[1:] += mine[:-1]
+        around[:-1] += mine[1:]
+        around[:, 1:] += mine[:, :-1]
+        around[:, :-1] += mine[:, 1:]
+        alive = mine | np.isnan(h[rs, cs]) | (around >= 3)
         for step in range(max(k_rows, k_cols)):
             core = alive.copy()
             if step < k_cols:
@@ -582,7 +589,7 @@ def _bands(
             core[[0, -1], :] = False
             core[:, [0, -1]] = False
             alive = core
-        band[t] = not (alive & (labels[rs, cs] == piece)).any()
+        band[t] = not (alive & mine).any()
         inside = labels[where]
         ring[t] = band[t] and bool((is_big[inside] & (inside != piece)).any())
     return band, ring
