@@ -581,6 +581,15 @@ def _standing_at(z: float, x: float, y: float, size, yaw_deg: float, colour) -> 
     return box_on(Plane(point=(0.0, 0.0, z)), x, y, size, yaw_deg, colour)
 
 
+def _tallest_found(boxes, camera: Camera, sigma_m: float, seed: int):
+    """The highest box found in ``boxes``' picture, through noise of ``sigma_m`` if any."""
+    depth, colour = render(Scene(camera, Plane(), tuple(boxes)))
+    if sigma_m:
+        depth = add_noise(depth, Noise(sigma_m=sigma_m), np.random.default_rng(seed))
+    found = find_boxes(depth, camera.lens, camera.camera_to_world, colour)
+    return max(found.boxes, key=lambda b: b.top_middle[2])
+
+
 @pytest.mark.parametrize("sigma_m", [0.0, 0.001])
 def test_a_box_overhanging_the_corner_of_the_one_under_it_stands_on_it(sigma_m):
     """A small box stands near a corner of a larger one and overhangs it there: past two of
@@ -590,12 +599,9 @@ def test_a_box_overhanging_the_corner_of_the_one_under_it_stands_on_it(sigma_m):
     for 68)."""
     lower = box_on(Plane(), 0.0, 0.14, (0.2241, 0.1226, 0.0778), 52.77, (184, 103, 195))
     upper = _standing_at(0.0778, 0.0048, 0.1659, (0.0862, 0.07, 0.0681), -36.53, (64, 121, 208))
-    camera = Camera.tilted(0.9, 26.4, width=640, height=480)
-    depth, colour = render(Scene(camera, Plane(), (lower, upper)))
-    if sigma_m:
-        depth = add_noise(depth, Noise(sigma_m=sigma_m), np.random.default_rng(5))
-    found = find_boxes(depth, camera.lens, camera.camera_to_world, colour)
-    top = max(found.boxes, key=lambda b: b.top_middle[2])
+    top = _tallest_found(
+        (lower, upper), Camera.tilted(0.9, 26.4, width=640, height=480), sigma_m, 5
+    )
     assert top.top_middle[2] == pytest.approx(0.1459, abs=0.002)
     assert top.size[2] == pytest.approx(0.0681, abs=0.003)
 
@@ -627,12 +633,7 @@ def test_a_box_between_lower_ones_touching_it_stands_on_the_table(sigma_m):
     ]
     boxes.append(box_on(Plane(), -d / 2, d / 2, (0.1, 0.1, 0.0718), 45.0, (78, 212, 202)))
     boxes.append(box_on(Plane(), d / 2, d / 2, (0.1, 0.1, 0.0599), 45.0, (153, 111, 63)))
-    camera = Camera.tilted(0.8, 6.36, width=640, height=480)
-    depth, colour = render(Scene(camera, Plane(), tuple(boxes)))
-    if sigma_m:
-        depth = add_noise(depth, Noise(sigma_m=sigma_m), np.random.default_rng(3))
-    found = find_boxes(depth, camera.lens, camera.camera_to_world, colour)
-    tall = max(found.boxes, key=lambda b: b.top_middle[2])
+    tall = _tallest_found(boxes, Camera.tilted(0.8, 6.36, width=640, height=480), sigma_m, 3)
     assert tall.top_middle[2] == pytest.approx(0.0718, abs=0.002)
     assert tall.size[2] == pytest.approx(0.0718, abs=0.002)
 
