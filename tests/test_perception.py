@@ -642,9 +642,9 @@ def test_noise_holes_do_not_make_a_narrow_top_a_band():
     """The seam test shrinks a piece between colour edges by 5 mm from each side (5 pixels
     where the nearest reading is 0.6 m away): nothing left, it is a band (a seam's dark
     line). A narrow top 12 pixels wide, pitted by noise (lone pixels cut by a height step of
-    a few sigma), shrank from every pit as from an edge and was taken for a
-    band; a pixel whose neighbours are three of them the piece is no edge. A band 4 pixels
-    wide, pitted the same, is still one."""
+    a few sigma), shrank from every pit as from an edge and was taken for a band; a pixel
+    whose neighbours are three of them the piece is no edge. A band 4 pixels wide, pitted the
+    same, is still one."""
     lens = Intrinsics(554.0, 554.0, 319.5, 239.5)
     support = Support((0.0, 0.0, 1.0), 0.0, 1.0, None, "camera", offset_camera_m=1.0)
     rng = np.random.default_rng(3)
