@@ -61,6 +61,9 @@ How a picture is read (whole-array work; Python loops only over tops, a few scal
    top that box hides a side of becomes a level. Faces running flush down onto a box of
    nearly the same footprint end where their colour changes, level across the face, unless a
    top at that height reaches out past that side (a box beside, whose top meets the face).
+   A box taken to stand on a box's top whose face is seen going on down past that top, on a
+   side the lower box has no face in the plane of (and the lower top cannot go on under the
+   box that way), stands beside it, lower: on the highest level under where the face is seen.
 7. The height is the top's distance from its base; the centre is the rectangle's middle less
    half the height along the normal.
 """
@@ -201,6 +204,8 @@ class _Plateau:
     score: float = 0.0
     base_m: float = 0.0
     on_plateau: int | None = None
+    stands_on: _Plateau | None = None
+    """The top it stands on (None: the support, or a ledge of its own with no top)."""
     platform: bool = False
     """A level others stand on whose own extent is hidden (a pallet's top): never a box."""
     on_platform: bool = False
@@ -1663,6 +1668,7 @@ def _bases(
             base[i] = int(max(over, key=lambda j: level_h[j])) if over else 0
         box.base_m = float(level_h[base[i]])
         level = levels[base[i]]
+        box.stands_on = level
         if level is not None and base[i] in platforms:
             level.platform = True
             box.on_platform = True
@@ -1691,7 +1697,7 @@ def _raise_to_faces(
     tolerance = np.array(
         [max(FACE_FOOTPRINTS * b.footprint_m, FACE_TOLERANCE_M, b.tolerance_m) for b in boxes]
     )
-    bottoms = faces.face_bottoms(
+    seen = faces.face_bottoms(
         np.array([r.middle for r in rects]),
         np.array([r.axis for r in rects]),
         np.array([[r.length_m / 2, r.width_m / 2] for r in rects]),
@@ -1704,7 +1710,7 @@ def _raise_to_faces(
         colour,
     )
     tops: list[tuple[float, _Plateau | None]] = [(p.height_m, p) for p in plateaus]
-    for box, bottom, tol in zip(boxes, bottoms, tolerance, strict=True):
+    for box, bottom, tol in zip(boxes, seen.bottoms, tolerance, strict=True):
         # The support, every top, and the box's own ledge.
         levels = [(0.0, None), *tops, *([] if box.ledge_m is None else [(box.ledge_m, None)])]
         slack = faces.resolution_m(box.height_m) + tol
@@ -1741,6 +1747,7 @@ def _raise_to_faces(
         if near:
             _, box.base_m, level = min(near, key=lambda n: abs(n[0]))
             box.on_plateau = level.label if level is not None and level.is_box else None
+            box.stands_on = level
             for p in plateaus:
                 if (
                     abs(p.height_m - box.base_m) <= max(p.tolerance_m, box.tolerance_m)
@@ -1751,7 +1758,103 @@ def _raise_to_faces(
                     # unknown (a box with one standing on it, seen as a strip): a level.
                     p.platform = True
         else:
-            box.base_m, box.on_plateau = bottom.middle_m, None
+            box.base_m, box.on_plateau, box.stands_on = bottom.middle_m, None, None
+    _lower_to_faces(boxes, plateaus, seen.reach_m, tolerance, settings)
+
+
+FLUSH_DEG = 20.0
+"""The most two sides may turn from each other and still run as one face where it is read."""
+
+
+def _lower_to_faces(
+    boxes: list[_Plateau],
+    plateaus: list[_Plateau],
+    reach_m: Float64Array,
+    tolerance: Float64Array,
+    settings: FinderSettings,
+) -> None:
+    """A box taken to stand on the top of a box beside it (that top's rim seen along one
+    side, its far side hidden by the taller box rising there) whose own face is seen going on
+    down well below that top, on a side that top has no side flush with, stands lower: a box
+    is solid down to its bottom, and only a box under it flush with that side could go on in
+    the face's plane. Its base is the highest level the face goes down to that may reach under
+    it, else the support."""
+    for box, sides, tol in zip(boxes, reach_m, tolerance, strict=True):
+        lower = box.stands_on
+        if lower is None or not lower.is_box or lower.rect is None or box.rect is None:
+            continue
+        slack = faces.resolution_m(box.height_m) + float(tol)
+        # Past a hidden side the lower top goes on under the box, how far is unknown: it may
+        # end flush with the box's side facing that way. The side facing the lower top says
+        # nothing either (its foot is the lower top's edge, or hidden by it).
+        ax = np.asarray(box.rect.axis)
+        perp = np.array([-ax[1], ax[0]])
+        toward = np.asarray(lower.rect.middle) - np.asarray(box.rect.middle)
+        toward /= max(float(np.linalg.norm(toward)), 1e-9)
+        open_ways = [np.asarray(h) for h in lower.rect.hidden_normals] + [toward]
+        deep = [
+            float(sides[k])
+            for k, normal in enumerate((ax, -ax, perp, -perp))
+            if sides[k] < box.base_m - max(settings.min_height_m, 2.0 * slack)
+            and not any(float(normal @ h) > 0.7 for h in open_ways)
+            and not _flush(lower, box, k, float(tol))
+        ]
+        if not deep:
+            continue
+        floor = min(deep) + slack
+        levels = [
+            p
+            for p in plateaus
+            if p is not box
+            and p is not lower
+            and p.height_m <= floor
+            and p.height_m < box.height_m - settings.min_height_m
+            and _reaches_under(p, box)
+        ]
+        level = max(levels, key=lambda p: p.height_m, default=None)
+        box.stands_on = level
+        box.base_m = 0.0 if level is None else level.height_m
+        box.on_plateau = level.label if level is not None and level.is_box else None
+        box.on_platform = level is not None and level.platform
+        if lower.platform and not any(
+            other.stands_on is lower for other in boxes if other is not box
+        ):
+            lower.platform = False
+
+
+def _flush(lower: _Plateau, box: _Plateau, side: int, tolerance_m: float) -> bool:
+    """Whether the lower top's rectangle has a side in the plane of the box's ``side``
+    (+length, -length, +width, -width), turned FLUSH_DEG from it at most: within
+    ``tolerance_m`` of the plane where the box's faces are read, or at the side's own middle
+    (a small top's turn is poorly known; the middle of its side is sure), and a footprint
+    more through noise. The box under the top may go on down that face."""
+    assert lower.rect is not None and box.rect is not None
+
+    def sides(rect: Rectangle) -> list[tuple[Float64Array, Float64Array, float]]:
+        """Each side's outward normal, middle and half length."""
+        ax = np.asarray(rect.axis)
+        perp = np.array([-ax[1], ax[0]])
+        middle = np.asarray(rect.middle)
+        hl, hw = rect.length_m / 2, rect.width_m / 2
+        return [
+            (n, middle + n * out, along)
+            for n, out, along in ((ax, hl, hw), (-ax, hl, hw), (perp, hw, hl), (-perp, hw, hl))
+        ]
+
+    normal, middle, half = sides(box.rect)[side]
+    if lower.tolerance_m > TOP_TOLERANCE_FLOOR_M:
+        # Through noise a top's sides are good to a footprint.
+        tolerance_m += lower.footprint_m
+    run = np.array([-normal[1], normal[0]])
+    feet = [middle + share * 2.0 * half * run for share in (faces.LINES[0], faces.LINES[-1])]
+    return any(
+        float(n @ normal) >= math.cos(math.radians(FLUSH_DEG))
+        and (
+            all(abs(float(n @ (foot - m))) <= tolerance_m for foot in feet)
+            or abs(float(normal @ (m - middle))) <= tolerance_m
+        )
+        for n, m, _ in sides(lower.rect)
+    )
 
 
 SEAM_REACH_M = 0.015

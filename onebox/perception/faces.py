@@ -25,6 +25,11 @@ colour may: with the colour picture, a line whose points on the face are all of 
 above a point and of another below it (a step of SEAM_STEP levels or more), at the same height
 as another line of the same side, ends there too (a ``seam``; the caller tells it from a top
 beside the box that meets the face there).
+
+The other way round, each side's ``reach``: how far down its face is seen unbroken from the
+top, on points where the surface seen lies both in the face's plane and at the point's height
+(not the rim of a top in front, nor the surface at its foot). A box's bottom is no higher
+than where its face is still seen, unless a box under it runs flush with that side.
 """
 
 from __future__ import annotations
@@ -77,6 +82,18 @@ class Bottom:
     """For a seam: the outward normals (plane coordinates) of the sides it is seen on."""
 
 
+@dataclass(frozen=True)
+class Faces:
+    """What the side faces of each box show."""
+
+    bottoms: list[Bottom | None]
+    """Where each box's faces end (see :func:`face_bottoms`)."""
+    reach_m: Float64Array
+    """N x 4 (sides +length, -length, +width, -width): how far down the face is seen on the
+    side, at the height of the face's own points and from its top on (the lowest point two of
+    its lines agree on); NaN where fewer than two lines see it."""
+
+
 def face_bottoms(
     middles: Float64Array,
     axes: Float64Array,
@@ -88,8 +105,9 @@ def face_bottoms(
     basis: Float64Array,
     camera_height_m: float,
     colour: npt.NDArray[np.uint8] | None = None,
-) -> list[Bottom | None]:
-    """Each box's bottom as its faces show it (see the module docstring).
+) -> Faces:
+    """Each box's bottom as its faces show it (see the module docstring), and how far down
+    each side's face is seen.
 
     ``middles`` (N x 2), ``axes`` (N x 2, unit, the length's) and ``halves`` (N x 2: half the
     length and half the width) are the tops' rectangles in plane coordinates (a = e1 . p,
@@ -99,7 +117,7 @@ def face_bottoms(
     """
     n_boxes = len(tops_m)
     if n_boxes == 0:
-        return []
+        return Faces([], np.zeros((0, 4)))
     ax = axes
     perp = np.stack([-ax[:, 1], ax[:, 0]], axis=1)
     # Sides: outward normal, direction along the side, half extent out and along.
@@ -135,6 +153,24 @@ def face_bottoms(
     low, high, ended = _line_ends(
         on[box_of, side_of, line_of], beyond[box_of, side_of, line_of], heights[box_of]
     )
+    # Each point is read at the pixel it falls in, whose ray meets the face up to half a
+    # pixel's height away.
+    px = span_px[box_of, side_of, line_of]
+    half_px = 0.5 * heights[box_of, 0] / px
+    # A point is the face's own where the surface seen there lies at the point's height too
+    # (the top of a rim in front lies within the plane's tolerance near the face, higher),
+    # and is not the surface at the face's foot.
+    seen_height = reading.seen_height[box_of, side_of, line_of]
+    line_tol = tol[box_of, 0, 0]
+    own = on[box_of, side_of, line_of] & (seen_height > line_tol)
+    own &= np.abs(seen_height - heights[box_of]) <= line_tol + half_px[:, np.newaxis]
+    deepest = _line_reach(own, beyond[box_of, side_of, line_of], heights[box_of], ended, high)
+    reach = np.full((n_boxes, 4), np.nan)
+    for key in np.unique(box_of * 4 + side_of):
+        depths = np.sort(deepest[(box_of * 4 + side_of) == key])
+        depths = depths[np.isfinite(depths)]
+        if len(depths) >= 2:
+            reach[key // 4, key % 4] = depths[1]
     if colour is not None:
         rows_at, cols_at = reading.pixels
         grey = _grey(colour[rows_at, cols_at])[box_of, side_of, line_of]
@@ -147,7 +183,6 @@ def face_bottoms(
         seam = np.zeros(len(low), dtype=bool)
     # Each pixel of a face seen steeply spans much of its height: a shade's step there is no
     # sure height (the face's plane a pixel off moves it by a pixel's height).
-    px = span_px[box_of, side_of, line_of]
     seam &= px >= SEAM_MIN_PX
     if seam.any():
         # A seam between two boxes runs level across the side: another line of the same side
@@ -157,9 +192,6 @@ def face_bottoms(
         for j in np.flatnonzero(seam):
             twins = seam & (side_key == side_key[j]) & (np.abs(s_high - s_high[j]) <= spacing[j])
             seam[j] = np.count_nonzero(twins) >= 2
-    # Each point is read at the pixel it falls in, whose ray meets the face up to half a
-    # pixel's height away.
-    half_px = 0.5 * heights[box_of, 0] / px
     result: list[Bottom | None] = []
     for i in range(n_boxes):
         slack = float(tolerances_m[i])
@@ -175,7 +207,7 @@ def face_bottoms(
             normals = tuple((float(out[i, k, 0]), float(out[i, k, 1])) for k in sides)
             bottom = replace(by_seam, seam=True, unseamed=bottom, seam_sides=normals)
         result.append(bottom)
-    return result
+    return Faces(result, reach)
 
 
 def resolution_m(top_m: float) -> float:
@@ -236,6 +268,36 @@ def _line_ends(
     low = heights[at, order[at, first]]
     high = heights[at, order[at, np.maximum(last_on, 0)]]
     return low, high, ended
+
+
+def _line_reach(
+    own: BoolArray,
+    beyond: BoolArray,
+    heights: Float64Array,
+    ended: BoolArray,
+    end_high: Float64Array,
+) -> Float64Array:
+    """Going down each line (rows), past the points that say nothing, the lowest point of the
+    face's own before the first RUN points that say something hold fewer than RUN_OF of its
+    own (the face is seen unbroken from its top to there), and above where the line ends
+    (``ended``, its last point on the face at ``end_high``); NaN where there is none."""
+    rows, samples = own.shape
+    said = own | beyond
+    order = np.argsort(~said, axis=1, kind="stable")
+    s_own = np.take_along_axis(own, order, 1)
+    s_heights = np.take_along_axis(heights, order, 1)
+    n_said = said.sum(axis=1)[:, np.newaxis]
+    c_own = np.concatenate([np.zeros((rows, 1), dtype=np.int64), np.cumsum(s_own, axis=1)], 1)
+    m = np.arange(samples)[np.newaxis, :]
+    window = c_own[:, m[0] + 1] - c_own[:, np.maximum(m[0] + 1 - RUN, 0)]
+    broken = (window < RUN_OF) & (m >= RUN - 1) & (m < n_said)
+    first_break = np.where(broken.any(axis=1), np.argmax(broken, axis=1), samples)
+    good = s_own & (m < first_break[:, np.newaxis]) & (m < n_said)
+    with np.errstate(invalid="ignore"):
+        good &= ~ended[:, np.newaxis] | (s_heights >= end_high[:, np.newaxis])
+    result: Float64Array = np.where(good, s_heights, np.inf).min(axis=1)
+    result[~np.isfinite(result)] = np.nan
+    return result
 
 
 def _grey(colour: npt.NDArray[np.uint8]) -> Float64Array:
