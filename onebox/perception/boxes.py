@@ -31,7 +31,8 @@ How a picture is read (whole-array work; Python loops only over tops, a few scal
    pass (:func:`onebox.perception.rectangle.fit_rectangles`).
 5. Not a box: a top touching the picture's border (cut off), smaller than ``min_top_area_m2``
    (or (3 sigma)^2 where the depth is noisy), seen narrower than 1 cm, not parallel to the
-   support, not flat, filling less than ``min_score`` of its rectangle (a disc fills pi/4;
+   support (a top narrower than its noise: by its plane along the rays, if it stands free),
+   not flat, filling less than ``min_score`` of its rectangle (a disc fills pi/4;
    under noise of 3 mm or more, a top seen whole by its hull; where a taller object in front
    hides part of the rectangle, of the part seen, if every side is seen along part of it and
    the outline seen hugs the sides), or curved:
@@ -112,6 +113,9 @@ HIDDEN_BAND_M = 0.01
 three footprints) has an unknown extent: it is left out."""
 HIDDEN_SHARE = 0.5
 """... and by more than this share of the top's seen extent across the hidden side."""
+RISING_SHARE = 0.02
+"""A top narrower than its noise is read along the rays only if less than this share of its
+outline sees the surface rise past a band with no reading (a pallet's margin, cartons on it)."""
 CROSS = ndimage.generate_binary_structure(2, 1)
 
 
@@ -185,8 +189,8 @@ class Found:
     frame: str = "camera"
 
 
-PAD = 3
-"""Empty pixels around the working crop, so looking three pixels past a top never wraps."""
+PAD = 6
+"""Empty pixels around the working crop, so looking six pixels past a top never wraps."""
 NEIGHBOURS = 4
 
 
@@ -750,6 +754,60 @@ def _spans(
     return result
 
 
+def _tilts(
+    top: npt.NDArray[np.int32],
+    n: Float64Array,
+    cols: npt.NDArray[np.intp],
+    rows: npt.NDArray[np.intp],
+    d: Float64Array,
+    across: Float64Array,
+    down: Float64Array,
+    normal: Float64Array,
+    count: int,
+) -> Float64Array:
+    """Each top's tilt from the support, degrees, from its plane fitted along the rays.
+
+    A plane n·p = c seen along the rays (x, y, 1) has 1 / depth = n·(x, y, 1) / c: linear in
+    the ray, which has no error, so least squares on 1 / depth leaves the error where it is,
+    in the depth. The least axis of the points' moments puts it everywhere: once the noise is
+    wider than a narrow top (sigma above its width / sqrt 12: a box 12 pixels wide 2 m from a
+    stereo camera), that axis turns across the top, and a slanted ray tips it further.
+    """
+    x, y, w = across[cols], down[rows], 1.0 / d
+    centred = []
+    for values in (x, y, w):
+        mean = np.bincount(top, weights=values, minlength=count) / n
+        centred.append((values - mean[top], mean))
+    cov = np.empty((count, 2, 3))
+    for i in range(2):
+        for j in range(3):
+            cov[:, i, j] = (
+                np.bincount(top, weights=centred[i][0] * centred[j][0], minlength=count) / n
+            )
+    spread = cov[:, :, :2] + np.eye(2) * 1e-18
+    alpha, beta = np.linalg.solve(spread, cov[:, :, 2:3])[:, :, 0].T
+    gamma = centred[2][1] - alpha * centred[0][1] - beta * centred[1][1]
+    plane = np.stack([alpha, beta, gamma], axis=1)
+    cos = np.abs(plane @ normal) / np.maximum(np.linalg.norm(plane, axis=1), 1e-300)
+    result: Float64Array = np.degrees(np.arccos(np.minimum(cos, 1.0)))
+    return result
+
+
+def _level(
+    tilt: float, ray_tilt: float, rising: float, rect: Rectangle, settings: FinderSettings
+) -> bool:
+    """Whether a top lies parallel to the support: by its moments' least axis, or, for a top
+    narrower than its depth noise (whose least axis turns across it), by its plane fitted
+    along the rays when at least three of its sides are seen falling away (edges, or the
+    dropout a stereo camera leaves at them): a box standing free, not the strip of a lower top
+    seen past a box on it, nor a pallet's margin, which a rising face bounds."""
+    limit = settings.max_top_tilt_deg
+    if tilt <= limit:
+        return True
+    falling = set(rect.edge_normals) | set(rect.dropout_normals)
+    return ray_tilt <= limit and len(falling) >= 3 and rising < RISING_SHARE
+
+
 def _measure_all(
     tops: _Tops,
     top_flat: npt.NDArray[np.int32],
@@ -801,6 +859,9 @@ def _measure_all(
     values_e, vectors = np.linalg.eigh(moments)
     rms = np.sqrt(np.maximum(values_e[:, 0], 0.0))
     tilt = np.degrees(np.arccos(np.minimum(np.abs(vectors[:, 2, 0]), 1.0)))
+    ray_tilt = _tilts(
+        st, ns, tops.cols[sample], tops.rows[sample], ds, across, down, basis[2], count
+    )
     # Outline: top pixels with a 4-neighbour off the top. Hidden: within two pixels past it the
     # surface rises above the top (something stands on it, or is in front of it).
     label_at = top_flat
@@ -834,6 +895,7 @@ def _measure_all(
     # For hidden outline points, how far along the support the nearest rising point past it
     # lies from it.
     stand_off = np.full(len(edge), np.inf)
+    risen_far = np.zeros(len(edge), dtype=bool)
     for offset in offsets:
         off = label_at[e_flat + offset] != e_top + 1
         beyond = h_flat[e_flat + offset]
@@ -855,6 +917,14 @@ def _measure_all(
             pb = basis[1, 0] * xf + basis[1, 1] * yf + basis[1, 2] * df
             stand_off[on] = np.fmin(stand_off[on], np.hypot(pa - a[on], pb - b[on]))
         unsure |= off & np.isnan(beyond)
+        # Past a band with no reading (a stereo camera's at a depth edge), the next three.
+        gap = np.flatnonzero(off & np.isnan(rise))
+        far = e_flat[gap]
+        far_rise = np.fmax(
+            np.fmax(h_flat[far + 4 * offset], h_flat[far + 5 * offset]), h_flat[far + 6 * offset]
+        )
+        with np.errstate(invalid="ignore"):
+            risen_far[gap] |= far_rise > e_level[gap]
         with np.errstate(invalid="ignore"):
             drop |= off & (np.fmin(beyond, h_flat[e_flat + 2 * offset]) < e_low)
     border = (tops.rows == 0) | (tops.rows == rows_n - 1) | (tops.cols == 0)
@@ -968,7 +1038,8 @@ def _measure_all(
             )
             fill = max(fill, seen)
         p.score = fill * flatness
-        if tilt[t] > settings.max_top_tilt_deg or p.score < settings.min_score:
+        rising = float(risen_far[part].mean()) if part.stop > part.start else 0.0
+        if p.score < settings.min_score or not _level(tilt[t], ray_tilt[t], rising, rect, settings):
             continue
         # Curved tops widen when the tolerance is loosened; a box's sides drop straight down.
         wide = loose[t]
