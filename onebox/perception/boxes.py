@@ -859,9 +859,21 @@ def _measure_all(
     values_e, vectors = np.linalg.eigh(moments)
     rms = np.sqrt(np.maximum(values_e[:, 0], 0.0))
     tilt = np.degrees(np.arccos(np.minimum(np.abs(vectors[:, 2, 0]), 1.0)))
-    ray_tilt = _tilts(
-        st, ns, tops.cols[sample], tops.rows[sample], ds, across, down, basis[2], count
-    )
+    # Along the rays only where the least axis finds a top tilted (noise may have turned it).
+    ray_tilt = np.full(count, np.inf)
+    steep = (tilt > settings.max_top_tilt_deg)[st]
+    if steep.any():
+        ray_tilt = _tilts(
+            st[steep],
+            ns,
+            tops.cols[sample][steep],
+            tops.rows[sample][steep],
+            ds[steep],
+            across,
+            down,
+            basis[2],
+            count,
+        )
     # Outline: top pixels with a 4-neighbour off the top. Hidden: within two pixels past it the
     # surface rises above the top (something stands on it, or is in front of it).
     label_at = top_flat
