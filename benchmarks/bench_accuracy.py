@@ -1,9 +1,11 @@
 """How right the boxes come out: the locator's finder on MuJoCo renders against the ground truth.
 
-    python benchmarks/bench_accuracy.py [--scenes 30] [--empty 50] [--seed 1] [--only NAME]
+    python benchmarks/bench_accuracy.py [--scenes 30] [--empty 50] [--pallets 30] [--seed 1]
+        [--only NAME]
 
 Builds each world the way ``onebox sim`` does (random scenes from seeds, 640 x 480 with an
-hfov of 60 degrees unless told otherwise, scene/pallet.toml,
+hfov of 60 degrees unless told otherwise; random loaded pallets from seeds
+(:func:`onebox.world.random_scene.random_pallet`); scene/pallet.toml,
 scene/clutter.toml, the seed's world), renders colour and depth with MuJoCo, adds the depth
 noise, and runs the box finder the locator runs (``onebox.perception.boxes.BoxFinder``) on the
 picture, the lens the sim publishes and the camera's pose, and judges what it finds against
@@ -32,7 +34,7 @@ from onebox.perception.boxes import BoxFinder, FinderSettings
 from onebox.testing.judged import Judged, judge, render_scene
 from onebox.world import spec
 from onebox.world.noise import PRESETS, NoiseSpec
-from onebox.world.random_scene import random_scene
+from onebox.world.random_scene import random_pallet, random_scene
 from onebox.world.scene import seed_scene
 from onebox.world.spec import SceneDesc
 
@@ -92,6 +94,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, allow_abbrev=False)
     parser.add_argument("--scenes", type=int, default=30, help="random scenes per case (30)")
     parser.add_argument("--empty", type=int, default=50, help="empty tables per noise (50)")
+    parser.add_argument("--pallets", type=int, default=30, help="random pallets per noise (30)")
     parser.add_argument("--seed", type=int, default=1, help="the first random scene's seed")
     parser.add_argument("--only", help="run only the cases whose title contains this")
     parser.add_argument("--width", type=int, default=640, help="random scenes' pictures (640)")
@@ -115,6 +118,9 @@ def main() -> None:
             for s in range(args.seed, args.seed + args.empty)
         ]
 
+    def pallets() -> list[SceneDesc]:
+        return [random_pallet(s) for s in range(args.seed, args.seed + args.pallets)]
+
     cases: list[tuple[str, list[SceneDesc] | None, NoiseSpec | None]] = [
         ("seed's world, noise-free", [seed_scene()], PRESETS["none"]),
         ("random, noise-free", None, PRESETS["none"]),
@@ -135,6 +141,8 @@ def main() -> None:
         ),
         ("empty tables, d435", None, PRESETS["d435"]),
         ("empty tables, azure_kinect", None, PRESETS["azure_kinect"]),
+        ("random pallets, noise-free", pallets(), PRESETS["none"]),
+        ("random pallets, d435", pallets(), PRESETS["d435"]),
         ("pallet, d435", [spec.load(SCENES / "pallet.toml")], PRESETS["d435"]),
         ("pallet, azure_kinect", [spec.load(SCENES / "pallet.toml")], PRESETS["azure_kinect"]),
         ("clutter, d435", [spec.load(SCENES / "clutter.toml")], PRESETS["d435"]),

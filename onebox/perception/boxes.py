@@ -113,6 +113,8 @@ HIDDEN_BAND_M = 0.01
 three footprints) has an unknown extent: it is left out."""
 HIDDEN_SHARE = 0.5
 """... and by more than this share of the top's seen extent across the hidden side."""
+SLAB = 0.25
+"""A box no taller than this share of its width is a slab: few cartons are."""
 RISING_SHARE = 0.02
 """A top narrower than its noise is read along the rays only if less than this share of its
 outline sees the surface rise past a band with no reading (a pallet's margin, cartons on it)."""
@@ -1464,7 +1466,11 @@ def _extent_unknown(box: _Plateau) -> bool:
 
 
 def _reaches_under(
-    lower: _Plateau, upper: _Plateau, slack: float = 0.01, exact: bool = False
+    lower: _Plateau,
+    upper: _Plateau,
+    slack: float = 0.01,
+    exact: bool = False,
+    rows: bool = False,
 ) -> bool:
     """Whether the lower top may go on under the upper box: its extent is unknown (no
     rectangle), its rectangle holds the upper's middle, or the upper lies past one of its
@@ -1473,7 +1479,9 @@ def _reaches_under(
     overhangs along the side (the next carton of a row, seen past its neighbour) does not
     reach under it: a top standing beside is no base. A top that is no box may go on past any
     side. ``exact``: only a box's top, past a hidden side whose span the upper's matches (the
-    upper hides the lower's top right across)."""
+    upper hides the lower's top right across). ``rows``: not a box's top that the upper meets
+    along the whole of a hidden side and that goes out from it as far as a carton (the next
+    carton of a row, a little lower, when what the upper stands on is still open)."""
     if lower.rect is None or (exact and not lower.is_box):
         return not exact
     assert upper.rect is not None
@@ -1502,7 +1510,23 @@ def _reaches_under(
         # The upper's half extent along the side, which must lie within the side's span.
         reach = _half_extent(upper.rect, -o1, o0)
         room = half_side + max(slack, 0.1 * reach)
-        if abs(ry * o0 - rx * o1) + reach <= room and (
+        offset = abs(ry * o0 - rx * o1)
+        if (
+            rows
+            and lower.is_box
+            and upper.height_m - lower.height_m < SLAB * upper.rect.width_m
+            and rect.hidden_sides <= 2
+            and offset <= max(slack, 0.1 * reach)
+            and abs(reach - half_side) <= max(slack, 0.1 * reach)
+            and half_out >= 0.6 * _half_extent(upper.rect, o0, o1)
+        ):
+            # The upper's side meets the whole hidden side, end to end, and the lower top
+            # goes out from it as far as a carton, not a strip: two cartons of a row side by
+            # side, the lower's side hidden by the taller one's rise, when the upper would be
+            # a slab standing on it (a tall box's faces show where it stands; a top walled in
+            # on three sides or four is a gap in a load, the surface under it).
+            continue
+        if offset + reach <= room and (
             not exact
             or (
                 half_side <= reach + max(slack, 0.1 * reach)
@@ -1567,7 +1591,7 @@ def _bases(
             continue
         for i, box in enumerate(boxes):
             if allowed[j, i]:
-                allowed[j, i] = _reaches_under(level, box)
+                allowed[j, i] = _reaches_under(level, box, rows=True)
     _own_faces(allowed, levels, boxes, height_m, labels_top, lens, support, cam)
     # Only the pairs (level, box) that may be the box's base are probed.
     pair_l, pair_b = np.nonzero(allowed)
@@ -1613,7 +1637,7 @@ def _bases(
     by_label = {p.label: p for p in plateaus if p.is_box}
     for t in np.unique(label_first[match & (label_first >= 0)]):
         if int(t) in by_label:
-            under[t] = [_reaches_under(by_label[int(t)], box) for box in boxes]
+            under[t] = [_reaches_under(by_label[int(t)], box, rows=True) for box in boxes]
     match &= (label_first < 0) | under[
         np.where(label_first >= 0, label_first, -1), pair_b[:, np.newaxis]
     ]
@@ -1656,7 +1680,7 @@ def _bases(
             and p is not box
             and abs(p.height_m - level_h[row]) < level_tol[row]
             and _touch(p, box)
-            and not _reaches_under(p, box)
+            and not _reaches_under(p, box, rows=True)
             for p in plateaus
         )
     partial = np.array([level is None or not level.is_box for level in levels]) & ~beside
@@ -1699,19 +1723,13 @@ def _bases(
         ok = np.flatnonzero(seen_ok[:, i])
         if len(ok):
             j = int(ok[np.argmax(level_h[ok])])
-            # Of the levels at that height, a box's top (the strip of a carton across which
-            # the box lies, not the sliver of a seam beside it), then the most seen.
+            # Of the levels at that height, the top whose rectangle holds the box's middle
+            # (not the next carton of its row, at the same height), then a box's top (the
+            # strip of a carton across which the box lies, not the sliver of a seam beside
+            # it), then the most seen.
             near = ok[np.abs(level_h[ok] - level_h[j]) < level_tol[j]]
             if len(near) > 1:
-                j = int(
-                    max(
-                        near,
-                        key=lambda k: (
-                            levels[k] is not None and levels[k].is_box,  # type: ignore[union-attr]
-                            matches[k, i],
-                        ),
-                    )
-                )
+                j = int(max(near, key=lambda k: _base_rank(levels[k], boxes[i], matches[k, i])))
             if owner[j] >= 0:
                 # The ledge is the top of a box the box stands on, when one is at its height.
                 same = np.flatnonzero(
@@ -1825,7 +1843,7 @@ def _raise_to_faces(
             for h, p in levels
             if bottom.low_m - slack <= h <= bottom.high_m + slack
             and p is not box
-            and (p is None or _reaches_under(p, box) or _past_hidden_side(p, box))
+            and (p is None or _reaches_under(p, box, rows=True) or _past_hidden_side(p, box))
         ]
         if near:
             _, box.base_m, level = min(near, key=lambda n: abs(n[0]))
@@ -1892,7 +1910,7 @@ def _lower_to_faces(
             and p is not lower
             and p.height_m <= floor
             and p.height_m < box.height_m - settings.min_height_m
-            and _reaches_under(p, box)
+            and _reaches_under(p, box, rows=True)
         ]
         level = max(levels, key=lambda p: p.height_m, default=None)
         box.stands_on = level
@@ -2050,6 +2068,14 @@ def _past_hidden_side(lower: _Plateau, upper: _Plateau) -> bool:
     rx = upper.rect.middle[0] - rect.middle[0]
     ry = upper.rect.middle[1] - rect.middle[1]
     return any(rx * o0 + ry * o1 > _half_extent(rect, o0, o1) for o0, o1 in rect.hidden_normals)
+
+
+def _base_rank(level: _Plateau | None, box: _Plateau, matches: int) -> tuple[bool, bool, int]:
+    """How a level ranks as a box's base among levels at one height (see :func:`_bases`)."""
+    if level is None:
+        return (False, False, matches)
+    holds = level.rect is not None and _inside(level, box)
+    return (holds, level.is_box, matches)
 
 
 def _inside(lower: _Plateau, upper: _Plateau) -> bool:

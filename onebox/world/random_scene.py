@@ -231,3 +231,80 @@ def _object_colour(rng: np.random.Generator) -> tuple[float, float, float, float
     palette = ((0.2, 0.45, 0.8), (0.25, 0.65, 0.3), (0.85, 0.75, 0.2), (0.55, 0.55, 0.6))
     r, g, b = palette[int(rng.integers(len(palette)))]
     return (r, g, b, 1.0)
+
+
+PALLET_SIZE_M = (1.2, 0.8, 0.144)
+"""A EUR pallet: 1.2 x 0.8 m, 144 mm tall."""
+CARTON_SIZES_M = (
+    (0.36, 0.275, 0.30),
+    (0.30, 0.20, 0.20),
+    (0.40, 0.30, 0.25),
+    (0.25, 0.25, 0.15),
+    (0.60, 0.40, 0.30),
+)
+"""The cartons a pallet is loaded with, one size a pallet."""
+
+
+def random_pallet(seed: int, width: int = 640, height: int = 480) -> SceneDesc:
+    """A loaded pallet drawn from ``seed``: cartons of one size in rows, touching or a few
+    millimetres apart, inset 0-6 cm from the pallet's edges, of one shade give or take; one
+    place in seven left empty, one carton in five of another height, one in three carrying a
+    smaller carton. The camera, 1.6-2.6 m over the floor and tilted up to 25 degrees, looks at
+    the pallet's middle. Box 0 is the pallet itself."""
+    rng = np.random.default_rng(seed)
+    yaw = float(rng.uniform(0.0, 90.0))
+    c, s = math.cos(math.radians(yaw)), math.sin(math.radians(yaw))
+    boxes = [BoxDesc(0.0, 0.0, PALLET_SIZE_M, round(yaw, 6), None, (0.70, 0.60, 0.45, 1.0))]
+    length, width_m, tall = CARTON_SIZES_M[int(rng.integers(len(CARTON_SIZES_M)))]
+    if rng.random() < 0.5:
+        length, width_m = width_m, length
+    inset = float(rng.uniform(0.0, 0.06))
+    gap = float(rng.uniform(0.0, 0.004))
+    columns = int((PALLET_SIZE_M[0] - 2 * inset + gap) // (length + gap))
+    rows = int((PALLET_SIZE_M[1] - 2 * inset + gap) // (width_m + gap))
+    x0 = -((columns - 1) * (length + gap)) / 2
+    y0 = -((rows - 1) * (width_m + gap)) / 2
+    shade = float(rng.uniform(0.55, 0.8))
+
+    def carton_rgba() -> tuple[float, float, float, float]:
+        r = shade + float(rng.uniform(-0.04, 0.04))
+        return (round(r, 3), round(r * 0.76, 3), round(r * 0.5, 3), 1.0)
+
+    for i in range(columns):
+        for j in range(rows):
+            if rng.random() < 0.15:
+                continue
+            u, v = x0 + i * (length + gap), y0 + j * (width_m + gap)
+            x, y = _round(u * c - v * s, 1e-4), _round(u * s + v * c, 1e-4)
+            h = tall if rng.random() < 0.8 else _round(tall * float(rng.uniform(0.5, 1.3)), 0.001)
+            boxes.append(BoxDesc(x, y, (length, width_m, h), round(yaw, 6), 0, carton_rgba()))
+            if rng.random() < 0.3:
+                small = (
+                    _round(length * float(rng.uniform(0.5, 0.8)), 0.001),
+                    _round(width_m * float(rng.uniform(0.5, 0.8)), 0.001),
+                    _round(tall * 0.6, 0.001),
+                )
+                turn = round(yaw + float(rng.uniform(-10.0, 10.0)), 6)
+                boxes.append(BoxDesc(x, y, small, turn, len(boxes) - 1, carton_rgba()))
+    above = float(rng.uniform(1.6, 2.6))
+    tilt = float(rng.uniform(0.0, 25.0))
+    pan = float(rng.uniform(-180.0, 180.0))
+    back = (above - 0.3) * math.tan(math.radians(tilt))
+    cam = CameraDesc(
+        x=_round(back * math.sin(math.radians(pan)), 1e-4),
+        y=_round(-back * math.cos(math.radians(pan)), 1e-4),
+        z=_round(above, 1e-4),
+        tilt_deg=_round(tilt, 0.01),
+        pan_deg=_round(pan, 0.01),
+        width=width,
+        height=height,
+        hfov_deg=60.0,
+    )
+    scene = SceneDesc(
+        camera=cam,
+        table=TableDesc(z=0.0, size=(6.0, 6.0)),
+        boxes=tuple(boxes),
+        description=f"random pallet {seed}: {len(boxes) - 1} cartons",
+    )
+    check(scene, f"random pallet {seed}")
+    return scene
