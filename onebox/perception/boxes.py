@@ -45,11 +45,14 @@ How a picture is read (whole-array work; Python loops only over tops, a few scal
    the box's own ledge (a rim just past its outline) counts with less, and when seen on every
    line of one side with no top at its height (a box underneath, overhung on the other sides);
    a lower top counts only if it reaches under the box (its rectangle holds the box's middle,
-   it is no box, or the box lies past one of its hidden sides); a piece that is no box and
+   it is no box, or the box lies past one of its hidden sides, unless the box meets that side
+   end to end, the top goes out from it as far as a carton and the box would be a slab on
+   it: the next carton of a row, a little lower); a piece that is no box and
    lies largely inside the box's rectangle is the box's own side face seen at a slant (nothing
-   under a box's top is seen), never its base. The highest such level is the
-   base; a box that sees none takes the base most of its touching neighbours have, else the
-   platform it stands over, else the support. A top that boxes stand on past its hidden side,
+   under a box's top is seen), never its base. The highest such level is the base (of tops
+   at its height, the one whose rectangle holds the box's middle); a box that sees none takes
+   the base most of its touching neighbours have, else the platform it stands over, else the
+   support. A top that boxes stand on past its hidden side,
    or that is mostly covered, is a platform (a pallet's top): a level, never reported as a
    box. On a platform, a side in the shadow of a taller carton between it and the camera runs
    halfway into the shadow (packed cartons touch; the shadow's middle is never off by more
@@ -1479,9 +1482,10 @@ def _reaches_under(
     overhangs along the side (the next carton of a row, seen past its neighbour) does not
     reach under it: a top standing beside is no base. A top that is no box may go on past any
     side. ``exact``: only a box's top, past a hidden side whose span the upper's matches (the
-    upper hides the lower's top right across). ``rows``: not a box's top that the upper meets
-    along the whole of a hidden side and that goes out from it as far as a carton (the next
-    carton of a row, a little lower, when what the upper stands on is still open)."""
+    upper hides the lower's top right across). ``rows``: nor a box's top that the upper meets
+    along the whole of a hidden side, that goes out from it as far as a carton, when the
+    upper would be a slab on it: the next carton of a row, a little lower (for choosing a
+    base; a base already chosen is not asked again)."""
     if lower.rect is None or (exact and not lower.is_box):
         return not exact
     assert upper.rect is not None
