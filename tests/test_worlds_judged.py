@@ -11,18 +11,24 @@ from onebox.perception.boxes import BoxFinder, FinderSettings
 from onebox.testing.judged import Judged, judge, render_scene
 from onebox.world.noise import PRESETS
 from onebox.world.random_scene import random_pallet, random_scene
+from onebox.world.spec import SceneDesc
 
 
-@pytest.mark.parametrize("seed", [1, 3, 4, 9, 15, 27, 47])
-def test_random_scene_every_box_right(seed):
-    """Every box found, none false, each height (partly hidden ones too) within 2 mm."""
-    scene = random_scene(seed, boxes=8, objects=3, width=640, height=480)
+def _judged(scene: SceneDesc) -> Judged:
+    """The finder on ``scene`` rendered noise-free, judged against its ground truth."""
     rendered = render_scene(scene, PRESETS["none"])
     found = BoxFinder(FinderSettings())(
         rendered.depth_m, rendered.lens, rendered.camera_to_world, rendered.rgb
     )
     judged = Judged()
     judge(found, rendered, judged)
+    return judged
+
+
+@pytest.mark.parametrize("seed", [1, 3, 4, 9, 15, 27, 47])
+def test_random_scene_every_box_right(seed):
+    """Every box found, none false, each height (partly hidden ones too) within 2 mm."""
+    judged = _judged(random_scene(seed, boxes=8, objects=3, width=640, height=480))
     assert judged.missed == 0 and judged.false == 0, judged.notes
     assert judged.found >= 3
     assert max(judged.height_mm + judged.hidden_height_mm) <= 2.0, judged.notes
@@ -34,12 +40,7 @@ def test_random_pallet_every_carton_right(seed):
     carrying a smaller one): every carton seen whole found, none false, each height within
     1 mm (on seed 5 the finder before measured a carton from its lower neighbour, 244 mm
     short of its height, and left the neighbour out)."""
-    rendered = render_scene(random_pallet(seed), PRESETS["none"])
-    found = BoxFinder(FinderSettings())(
-        rendered.depth_m, rendered.lens, rendered.camera_to_world, rendered.rgb
-    )
-    judged = Judged()
-    judge(found, rendered, judged)
+    judged = _judged(random_pallet(seed))
     assert judged.missed == 0 and judged.false == 0, judged.notes
     assert judged.found >= 5
     assert max(judged.height_mm) <= 1.0, judged.notes
