@@ -141,8 +141,8 @@ def main() -> None:
         ),
         ("empty tables, d435", None, PRESETS["d435"]),
         ("empty tables, azure_kinect", None, PRESETS["azure_kinect"]),
-        ("random pallets, noise-free", pallets(), PRESETS["none"]),
-        ("random pallets, d435", pallets(), PRESETS["d435"]),
+        ("random pallets, noise-free", None, PRESETS["none"]),
+        ("random pallets, d435", None, PRESETS["d435"]),
         ("pallet, d435", [spec.load(SCENES / "pallet.toml")], PRESETS["d435"]),
         ("pallet, azure_kinect", [spec.load(SCENES / "pallet.toml")], PRESETS["azure_kinect"]),
         ("clutter, d435", [spec.load(SCENES / "clutter.toml")], PRESETS["d435"]),
@@ -152,7 +152,12 @@ def main() -> None:
         if args.only and args.only not in title:
             continue
         if scenes is None:
-            scenes = empty() if title.startswith("empty") else randoms(8, 3)
+            if title.startswith("empty"):
+                scenes = empty()
+            elif title.startswith("random pallets"):
+                scenes = pallets()
+            else:
+                scenes = randoms(8, 3)
         errors = Errors()
         run_case(scenes, noise, errors)
         report(title, errors, args.verbose)

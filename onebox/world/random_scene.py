@@ -3,7 +3,8 @@ objects among them, on a table at a random height, under a camera at a random he
 
 Every box's top lies wholly inside the picture. The same seed always gives the same world (one
 NumPy PCG64 stream, drawn in a fixed order); ``onebox sim --random-scene SEED --write-scene
-FILE.toml`` saves it as a scene file.
+FILE.toml`` saves it as a scene file. :func:`random_pallet` draws a loaded pallet instead:
+cartons of one size in rows on a EUR pallet.
 """
 
 from __future__ import annotations
