@@ -26,8 +26,9 @@ How a picture is read (whole-array work; Python loops only over tops, a few scal
    they meet in the band's middle.
 4. All tops measured together from their grouped pixels: area (holes filled by each row's and
    column's span), the top's plane (moments on a sample), the outline and, for each outline
-   pixel, what lies past it: rising (hidden by something standing on or in front of the top),
-   dropping (a real edge) or no reading (dropout). Every rectangle is fitted in one batched
+   pixel, what lies past it: rising (hidden by something standing on or in front of the top,
+   also when first seen past a band of no reading), dropping (a real edge) or no reading
+   (dropout). Every rectangle is fitted in one batched
    pass (:func:`onebox.perception.rectangle.fit_rectangles`).
 5. Not a box: a top touching the picture's border (cut off), smaller than ``min_top_area_m2``
    (or (3 sigma)^2 where the depth is noisy), seen narrower than 1 cm, not parallel to the
@@ -50,7 +51,10 @@ How a picture is read (whole-array work; Python loops only over tops, a few scal
    it: the next carton of a row, a little lower); a piece that is no box and
    lies largely inside the box's rectangle is the box's own side face seen at a slant (nothing
    under a box's top is seen), never its base. The highest such level is the base (of tops
-   at its height, the one whose rectangle holds the box's middle); a box that sees none takes
+   at its height, the one whose rectangle holds the box's middle). A box whose base is seen
+   past one side only takes the higher base of a touching box of its height, when that base
+   may reach under it (past a load's edge the floor is seen, the pallet's rim lost in the
+   dropout). A box that sees none takes
    the base most of its touching neighbours have, else the platform it stands over, else the
    support. A top that boxes stand on past its hidden side,
    or that is mostly covered, is a platform (a pallet's top): a level, never reported as a
@@ -194,8 +198,8 @@ class Found:
     frame: str = "camera"
 
 
-PAD = 6
-"""Empty pixels around the working crop, so looking six pixels past a top never wraps."""
+PAD = 12
+"""Empty pixels around the working crop, so looking twelve pixels past a top never wraps."""
 NEIGHBOURS = 4
 
 
@@ -934,16 +938,21 @@ def _measure_all(
             pb = basis[1, 0] * xf + basis[1, 1] * yf + basis[1, 2] * df
             stand_off[on] = np.fmin(stand_off[on], np.hypot(pa - a[on], pb - b[on]))
         unsure |= off & np.isnan(beyond)
-        # Past a band with no reading (a stereo camera's at a depth edge), the next three.
+        # Past a band with no reading (a stereo camera's at a depth edge, as wide as a steep
+        # face seen past it and the band each side of that), the first reading says whether
+        # the surface rises there.
         gap = np.flatnonzero(off & np.isnan(rise))
-        far = e_flat[gap]
-        far_rise = np.fmax(
-            np.fmax(h_flat[far + 4 * offset], h_flat[far + 5 * offset]), h_flat[far + 6 * offset]
-        )
-        with np.errstate(invalid="ignore"):
-            risen_far[gap] |= far_rise > e_level[gap]
+        far, undecided = e_flat[gap], np.ones(len(gap), dtype=bool)
+        for k in range(4, PAD + 1):
+            beyond_k = h_flat[far + k * offset]
+            with np.errstate(invalid="ignore"):
+                up = undecided & (beyond_k > e_level[gap])
+                undecided &= np.isnan(beyond_k)
+            risen_far[gap[up]] = True
         with np.errstate(invalid="ignore"):
             drop |= off & (np.fmin(beyond, h_flat[e_flat + 2 * offset]) < e_low)
+    # Past a dropout band something rises: hidden as much as by a rise right past the top.
+    hidden |= risen_far
     border = (tops.rows == 0) | (tops.rows == rows_n - 1) | (tops.cols == 0)
     border |= tops.cols == cols_n - 1
     cut_off = np.bincount(top[border], minlength=count) > 0
@@ -1020,7 +1029,7 @@ def _measure_all(
         if (
             tol[t] > RAGGED_TOLERANCE_M
             and fill >= RAGGED_MIN_FILL
-            and rect.hidden_sides == 0
+            and rect.hidden_sides <= 1
             and len(points) >= 3
         ):
             # Noise this large makes a top's outline ragged (readings near its edge fall in and
@@ -1745,6 +1754,33 @@ def _bases(
                 if len(same):
                     j = int(same[np.argmax(matches[same, i])])
             base[i] = j
+    # Touching boxes of one height stand on one level. A base seen past one side only may be
+    # the floor past a load's edge, the platform's rim there lost in the camera's dropout or
+    # under the box's shadow: such a box takes the higher base of a touching box of its
+    # height, when that base may reach under it.
+    pair_at = {(int(j), int(i)): k for k, (j, i) in enumerate(zip(pair_l, pair_b, strict=True))}
+    one_side = {
+        i
+        for i, j in base.items()
+        if (i_k := pair_at.get((j, i))) is not None and (side_match[i_k] > 0).sum() <= 1
+    }
+    for _ in range(3):
+        changed = False
+        for low in sorted(one_side):
+            for near_k, other in enumerate(boxes):
+                theirs = base.get(near_k)
+                if (
+                    theirs is not None
+                    and near_k != low
+                    and level_h[theirs] > level_h[base[low]] + level_tol[base[low]]
+                    and allowed[theirs, low]
+                    and abs(other.height_m - box_h[low]) < max(other.tolerance_m, box_tol[low])
+                    and _touch(boxes[low], other)
+                ):
+                    base[low] = theirs
+                    changed = True
+        if not changed:
+            break
     # A box hemmed in by touching boxes stands where most of them stand.
     for _ in range(3):
         changed = False
