@@ -46,17 +46,19 @@ How a picture is read (whole-array work; Python loops only over tops, a few scal
    the box's own ledge (a rim just past its outline) counts with less, and when seen on every
    line of one side with no top at its height (a box underneath, overhung on the other sides);
    a lower top counts only if it reaches under the box (its rectangle holds the box's middle,
-   it is no box, or the box lies past one of its hidden sides, unless the box meets that side
-   end to end, the top goes out from it as far as a carton and the box would be a slab on
-   it: the next carton of a row, a little lower); a piece that is no box and
+   it is no box, or the box lies past one of its hidden sides), unless the box meets one of
+   its sides end to end, the top goes out from it as far as a carton and the box would be a
+   slab on it: the next carton of a row, a little lower (a carton's top that the box on it
+   keeps from being a box too); a piece that is no box and
    lies largely inside the box's rectangle is the box's own side face seen at a slant (nothing
    under a box's top is seen), never its base. The highest such level is the base (of tops
-   at its height, the one whose rectangle holds the box's middle). A box whose base is seen
-   past one side only takes the higher base of a touching box of its height, when that base
-   may reach under it (past a load's edge the floor is seen, the pallet's rim lost in the
-   dropout). A box that sees none takes
-   the base most of its touching neighbours have, else the platform it stands over, else the
-   support. A top that boxes stand on past its hidden side,
+   at its height, the one whose rectangle holds the box's middle); a box that sees none takes
+   the base most of its touching neighbours have. A box left on the support seen past one
+   side only (or by its neighbours) takes the higher base of a touching box of its height,
+   when a level there that is no box's top may reach under it: past a load's edge the floor
+   is seen, the pallet's rim there out of sight or lost in the dropout. A box still without
+   a base stands on the platform it stands over, else the support. A top that boxes stand on
+   past its hidden side,
    or that is mostly covered, is a platform (a pallet's top): a level, never reported as a
    box. On a platform, a side in the shadow of a taller carton between it and the camera runs
    halfway into the shadow (packed cartons touch; the shadow's middle is never off by more
@@ -1491,10 +1493,9 @@ def _reaches_under(
     overhangs along the side (the next carton of a row, seen past its neighbour) does not
     reach under it: a top standing beside is no base. A top that is no box may go on past any
     side. ``exact``: only a box's top, past a hidden side whose span the upper's matches (the
-    upper hides the lower's top right across). ``rows``: nor a box's top that the upper meets
-    along the whole of a hidden side, that goes out from it as far as a carton, when the
-    upper would be a slab on it: the next carton of a row, a little lower (for choosing a
-    base; a base already chosen is not asked again)."""
+    upper hides the lower's top right across). ``rows``: nor the top of the next carton of a
+    row, a little lower (:func:`_next_in_row`), a box's or one that a box on it keeps from
+    being a box (for choosing a base; a base already chosen is not asked again)."""
     if lower.rect is None or (exact and not lower.is_box):
         return not exact
     assert upper.rect is not None
@@ -1506,17 +1507,15 @@ def _reaches_under(
     hl, hw = rect.length_m / 2, rect.width_m / 2
     if not exact and abs(along) <= hl + slack and abs(across) <= hw + slack:
         return True
+    all_sides = ((ax0, ax1), (-ax0, -ax1), (-ax1, ax0), (ax1, -ax0))
     if not exact and not lower.is_box and _touch(lower, upper):
         # A top that is no box is seen only in part (the box on it hides the rest, and the
-        # box's own side face seen at a slant): touching is enough; the probes decide.
-        return True
+        # box's own side face seen at a slant): touching is enough; the probes decide. But
+        # not a carton's top that a box on it keeps from being a box of its own, beside the
+        # next carton of its row.
+        return not rows or not any(_next_in_row(lower, upper, o, slack) for o in all_sides)
     # A top that is no box may have any of its sides hidden (noise hides the rise).
-    sides = (
-        rect.hidden_normals
-        if lower.is_box
-        else ((ax0, ax1), (-ax0, -ax1), (-ax1, ax0), (ax1, -ax0))
-    )
-    for o0, o1 in sides:
+    for o0, o1 in rect.hidden_normals if lower.is_box else all_sides:
         half_out, half_side = (hl, hw) if abs(o0 * ax0 + o1 * ax1) > 0.7 else (hw, hl)
         if rx * o0 + ry * o1 < half_out - slack:
             continue
@@ -1524,20 +1523,7 @@ def _reaches_under(
         reach = _half_extent(upper.rect, -o1, o0)
         room = half_side + max(slack, 0.1 * reach)
         offset = abs(ry * o0 - rx * o1)
-        if (
-            rows
-            and lower.is_box
-            and upper.height_m - lower.height_m < SLAB * upper.rect.width_m
-            and rect.hidden_sides <= 2
-            and offset <= max(slack, 0.1 * reach)
-            and abs(reach - half_side) <= max(slack, 0.1 * reach)
-            and half_out >= 0.6 * _half_extent(upper.rect, o0, o1)
-        ):
-            # The upper's side meets the whole hidden side, end to end, and the lower top
-            # goes out from it as far as a carton, not a strip: two cartons of a row side by
-            # side, the lower's side hidden by the taller one's rise, when the upper would be
-            # a slab standing on it (a tall box's faces show where it stands; a top walled in
-            # on three sides or four is a gap in a load, the surface under it).
+        if rows and lower.is_box and _next_in_row(lower, upper, (o0, o1), slack):
             continue
         if offset + reach <= room and (
             not exact
@@ -1550,6 +1536,35 @@ def _reaches_under(
         ):
             return True
     return False
+
+
+def _next_in_row(lower: _Plateau, upper: _Plateau, side: tuple[float, float], slack: float) -> bool:
+    """Whether the upper box stands past the lower top's ``side`` as the next carton of a row:
+    it meets the whole side, end to end, and the lower top goes out from it as far as a
+    carton, not a strip, and the upper would be a slab standing on it (a tall box's faces show
+    where it stands). Two cartons of a row side by side, the lower's side hidden by the taller
+    one's rise; a top walled in on three sides or four is a gap in a load, the surface under
+    it, and stays a base."""
+    assert lower.rect is not None and upper.rect is not None
+    rect = lower.rect
+    ax0, ax1 = rect.axis
+    o0, o1 = side
+    rx = upper.rect.middle[0] - rect.middle[0]
+    ry = upper.rect.middle[1] - rect.middle[1]
+    half_out, half_side = (
+        (rect.length_m / 2, rect.width_m / 2)
+        if abs(o0 * ax0 + o1 * ax1) > 0.7
+        else (rect.width_m / 2, rect.length_m / 2)
+    )
+    reach = _half_extent(upper.rect, -o1, o0)
+    fit = max(slack, 0.1 * reach)
+    return (
+        rx * o0 + ry * o1 >= half_out - slack
+        and upper.height_m - lower.height_m < SLAB * upper.rect.width_m
+        and abs(ry * o0 - rx * o1) <= fit
+        and abs(reach - half_side) <= fit
+        and half_out >= 0.6 * _half_extent(upper.rect, o0, o1)
+    )
 
 
 def _half_extent(rect: Rectangle, d0: float, d1: float) -> float:
@@ -1754,33 +1769,14 @@ def _bases(
                 if len(same):
                     j = int(same[np.argmax(matches[same, i])])
             base[i] = j
-    # Touching boxes of one height stand on one level. A base seen past one side only may be
-    # the floor past a load's edge, the platform's rim there lost in the camera's dropout or
-    # under the box's shadow: such a box takes the higher base of a touching box of its
-    # height, when that base may reach under it.
+    # The support seen past one side only is weak: it may be the floor past a load's edge,
+    # the platform's rim there lost in the camera's dropout or in the box's shadow.
     pair_at = {(int(j), int(i)): k for k, (j, i) in enumerate(zip(pair_l, pair_b, strict=True))}
-    one_side = {
+    weak = {
         i
         for i, j in base.items()
-        if (i_k := pair_at.get((j, i))) is not None and (side_match[i_k] > 0).sum() <= 1
+        if j == 0 and (i_k := pair_at.get((j, i))) is not None and (side_match[i_k] > 0).sum() <= 1
     }
-    for _ in range(3):
-        changed = False
-        for low in sorted(one_side):
-            for near_k, other in enumerate(boxes):
-                theirs = base.get(near_k)
-                if (
-                    theirs is not None
-                    and near_k != low
-                    and level_h[theirs] > level_h[base[low]] + level_tol[base[low]]
-                    and allowed[theirs, low]
-                    and abs(other.height_m - box_h[low]) < max(other.tolerance_m, box_tol[low])
-                    and _touch(boxes[low], other)
-                ):
-                    base[low] = theirs
-                    changed = True
-        if not changed:
-            break
     # A box hemmed in by touching boxes stands where most of them stand.
     for _ in range(3):
         changed = False
@@ -1794,7 +1790,38 @@ def _bases(
             ]
             if votes:
                 base[i] = max(set(votes), key=lambda j: (votes.count(j), level_h[j]))
+                if base[i] == 0:
+                    weak.add(i)
                 changed = True
+        if not changed:
+            break
+    # Touching boxes of one height stand on one level: a box whose base is weak takes the
+    # higher base of a touching box of its height, when a level there that is no box's top
+    # (a platform's) may reach under it.
+    is_box_top = np.array([level is not None and level.is_box for level in levels])
+    for _ in range(3):
+        changed = False
+        for low in sorted(weak):
+            for near_k, other in enumerate(boxes):
+                theirs = base.get(near_k)
+                if (
+                    theirs is None
+                    or near_k == low
+                    or level_h[theirs] <= level_h[base[low]] + level_tol[base[low]]
+                    or abs(other.height_m - box_h[low]) >= max(other.tolerance_m, box_tol[low])
+                    or not _touch(boxes[low], other)
+                ):
+                    continue
+                # Their base, or a level at its height that may be this box's (their base
+                # may be their own ledge).
+                same = np.flatnonzero(
+                    allowed[:, low]
+                    & (np.abs(level_h - level_h[theirs]) < level_tol[theirs])
+                    & ~is_box_top
+                )
+                if len(same):
+                    base[low] = int(same[np.argmax(matches[same, low])])
+                    changed = True
         if not changed:
             break
     platforms = {
