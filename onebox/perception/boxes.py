@@ -954,6 +954,7 @@ def _measure_all(
         with np.errstate(invalid="ignore"):
             drop |= off & (np.fmin(beyond, h_flat[e_flat + 2 * offset]) < e_low)
     # Past a dropout band something rises: hidden as much as by a rise right past the top.
+    rise_near = hidden.copy()
     hidden |= risen_far
     border = (tops.rows == 0) | (tops.rows == rows_n - 1) | (tops.cols == 0)
     border |= tops.cols == cols_n - 1
@@ -1028,10 +1029,12 @@ def _measure_all(
         points = np.stack([a[part], b[part]], axis=1)
         rect_area = (np.ptp(points @ ax) + footprint[t]) * (np.ptp(points @ perp) + footprint[t])
         fill = min(float(whole_area[t]) / rect_area, 1.0)
+        # A side hidden by what rises past a dropout band is ragged like a seen one.
+        through_dropout = rect.hidden_sides == 1 and risen_far[part].sum() > rise_near[part].sum()
         if (
             tol[t] > RAGGED_TOLERANCE_M
             and fill >= RAGGED_MIN_FILL
-            and rect.hidden_sides <= 1
+            and (rect.hidden_sides == 0 or through_dropout)
             and len(points) >= 3
         ):
             # Noise this large makes a top's outline ragged (readings near its edge fall in and
@@ -1608,9 +1611,12 @@ def _bases(
     label_height = np.full(max(p.label for p in plateaus) + 1, np.nan)
     label_height[[p.label for p in plateaus]] = [p.height_m for p in plateaus]
     box_h = np.array([b.height_m for b in boxes])
-    # A level within the noise of the box's own top is that top, not one under it.
+    # A level within the noise of the box's own top is that top, not one under it (each
+    # tolerance is three sigma of one reading: the two add in quadrature).
     box_tol = np.array([b.tolerance_m for b in boxes])
-    gap = np.maximum(settings.min_height_m, box_tol[np.newaxis, :] + level_tol[:, np.newaxis])
+    gap = np.maximum(
+        settings.min_height_m, np.hypot(box_tol[np.newaxis, :], level_tol[:, np.newaxis])
+    )
     allowed = level_h[:, np.newaxis] < box_h[np.newaxis, :] - gap
     mine = owner[:, np.newaxis] == np.arange(len(boxes))[np.newaxis, :]
     allowed &= (owner[:, np.newaxis] < 0) | mine
@@ -1795,19 +1801,21 @@ def _bases(
                 changed = True
         if not changed:
             break
-    # Touching boxes of one height stand on one level: a box whose base is weak takes the
-    # higher base of a touching box of its height, when a level there that is no box's top
-    # (a platform's) may reach under it.
+    # Touching boxes of one height stand on one level: a box whose base is weak (or still
+    # undecided) takes the higher base of a touching box of its height, when a level there
+    # that is no box's top (a platform's) may reach under it.
     is_box_top = np.array([level is not None and level.is_box for level in levels])
+    weak |= {i for i in range(len(boxes)) if i not in base}
     for _ in range(3):
         changed = False
         for low in sorted(weak):
+            current = base.get(low, 0)  # still undecided: the support, for now
             for near_k, other in enumerate(boxes):
                 theirs = base.get(near_k)
                 if (
                     theirs is None
                     or near_k == low
-                    or level_h[theirs] <= level_h[base[low]] + level_tol[base[low]]
+                    or level_h[theirs] <= level_h[current] + level_tol[current]
                     or abs(other.height_m - box_h[low]) >= max(other.tolerance_m, box_tol[low])
                     or not _touch(boxes[low], other)
                 ):
@@ -1820,7 +1828,7 @@ def _bases(
                     & ~is_box_top
                 )
                 if len(same):
-                    base[low] = int(same[np.argmax(matches[same, low])])
+                    current = base[low] = int(same[np.argmax(matches[same, low])])
                     changed = True
         if not changed:
             break
