@@ -49,7 +49,7 @@ def test_random_pallet_every_carton_right(seed):
     assert max(judged.height_mm) <= 1.0, judged.notes
 
 
-@pytest.mark.parametrize("seed", [2, 7, 11, 24])
+@pytest.mark.parametrize("seed", [2, 7, 11, 15, 24])
 def test_random_pallet_through_d435_every_carton_on_its_base(seed):
     """Through a stereo camera's depth (noise, dropout at every edge), cartons at the load's
     edge stand on the pallet, not on the floor seen past them: the pallet's rim there is lost
@@ -57,7 +57,8 @@ def test_random_pallet_through_d435_every_carton_on_its_base(seed):
     band. Finders before measured them 144 mm too tall (the pallet's height), on seed 7 took
     a strip of the pallet's top for a box, and on seeds 11 and 24 measured the small cartons
     on cartons 2.3 m away from the pallet or the floor: a step of 91 mm was within the two
-    tops' noise added (3 sigma each, 57 mm), not in quadrature."""
+    tops' noise added (3 sigma each, 57 mm), not in quadrature. On seed 15 a place left
+    empty, walled in by cartons on three sides, showed the pallet's top, taken for a box."""
     judged = _judged(random_pallet(seed), "d435")
     assert judged.missed == 0 and judged.false == 0, judged.notes
     assert judged.found >= 5

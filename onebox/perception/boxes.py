@@ -60,9 +60,10 @@ How a picture is read (whole-array work; Python loops only over tops, a few scal
    a base stands on the platform it stands over, else the support. A top that boxes stand on
    past its hidden side,
    or that is mostly covered, is a platform (a pallet's top): a level, never reported as a
-   box. On a platform, a side in the shadow of a taller carton between it and the camera runs
-   halfway into the shadow (packed cartons touch; the shadow's middle is never off by more
-   than half of it).
+   box; so is a top walled in on two sides or more at the height a touching box stands at
+   (the pallet seen where a carton is missing). On a platform, a side in the shadow of a
+   taller carton between it and the camera runs halfway into the shadow (packed cartons
+   touch; the shadow's middle is never off by more than half of it).
    A top with a hidden side that something standing well off it (a taller object in front)
    may hide by more than half its seen extent is left out: its size is unknown.
    Then each box's side faces (:mod:`onebox.perception.faces`): faces that end well above
@@ -1850,6 +1851,19 @@ def _bases(
             box.on_platform = True
         elif level is not None and level.is_box:
             box.on_plateau = level.label
+    # A top walled in on two sides or more, at the height a touching box stands at, is that
+    # surface seen through a gap in a load (a carton missing): a level, not a box.
+    for i, box in enumerate(boxes):
+        assert box.rect is not None
+        if box.rect.hidden_sides >= 2 and any(
+            k != i
+            and other.stands_on is not box
+            and other.base_m > 0
+            and abs(other.base_m - box.height_m) < max(box.tolerance_m, 0.004)
+            and _touch(box, other)
+            for k, other in enumerate(boxes)
+        ):
+            box.platform = True
 
 
 def _raise_to_faces(
