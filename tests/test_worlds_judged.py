@@ -35,17 +35,19 @@ def test_random_scene_every_box_right(seed):
     assert max(judged.height_mm + judged.hidden_height_mm) <= 2.0, judged.notes
 
 
-@pytest.mark.parametrize("seed", [2, 5, 8, 11, 30])
+@pytest.mark.parametrize("seed", [2, 5, 8, 11, 30, 202, 209])
 def test_random_pallet_every_carton_right(seed):
     """A loaded pallet (rows of touching cartons, some lower than their neighbours, some
     carrying a smaller one): every carton seen whole found, none false, each height within
     1 mm. Finders before measured a carton from its lower neighbour: on seed 5 a box's top
     (244 mm short, the neighbour left out); on seed 30 a carton's top that the small carton
     on it keeps from being a box (94 mm short, three cartons); on seed 11 the two cartons
-    at the load's edge from the floor (the pallet's rim past them is out of sight)."""
+    at the load's edge from the floor (the pallet's rim past them is out of sight); on seeds
+    202 and 209 cartons from a neighbour 69-83 mm lower (a quarter of their width was the
+    most a box could stand on the next carton of its row by)."""
     judged = _judged(random_pallet(seed))
     assert judged.missed == 0 and judged.false == 0, judged.notes
-    assert judged.found >= 5
+    assert judged.found >= 4
     assert max(judged.height_mm) <= 1.0, judged.notes
 
 

@@ -60,8 +60,8 @@ How a picture is read (whole-array work; Python loops only over tops, a few scal
    a base stands on the platform it stands over, else the support. A top that boxes stand on
    past its hidden side,
    or that is mostly covered, is a platform (a pallet's top): a level, never reported as a
-   box; so is a top walled in on two sides or more at the height a touching box stands at
-   (the pallet seen where a carton is missing). On a platform, a side in the shadow of a
+   box; so is a top walled in on two sides or more at the height two touching boxes stand
+   at (the pallet seen where a carton is missing). On a platform, a side in the shadow of a
    taller carton between it and the camera runs halfway into the shadow (packed cartons
    touch; the shadow's middle is never off by more than half of it).
    A top with a hidden side that something standing well off it (a taller object in front)
@@ -123,8 +123,10 @@ HIDDEN_BAND_M = 0.01
 three footprints) has an unknown extent: it is left out."""
 HIDDEN_SHARE = 0.5
 """... and by more than this share of the top's seen extent across the hidden side."""
-SLAB = 0.25
-"""A box no taller than this share of its width is a slab: few cartons are."""
+SLAB = 0.5
+"""A box standing less tall over a top than this share of its width would be a slab on it:
+few cartons are (a carton 25 cm wide, less than 12.5 cm over the next one of its row, stands
+beside it, on what that one stands on)."""
 RISING_SHARE = 0.02
 """A top narrower than its noise is read along the rays only if less than this share of its
 outline sees the surface rise past a band with no reading (a pallet's margin, cartons on it)."""
@@ -1826,7 +1828,7 @@ def _bases(
                 same = np.flatnonzero(
                     allowed[:, low]
                     & (np.abs(level_h - level_h[theirs]) < level_tol[theirs])
-                    & ~is_box_top
+                    & (~is_box_top | (np.arange(len(levels)) == theirs))
                 )
                 if len(same):
                     current = base[low] = int(same[np.argmax(matches[same, low])])
@@ -1851,17 +1853,21 @@ def _bases(
             box.on_platform = True
         elif level is not None and level.is_box:
             box.on_plateau = level.label
-    # A top walled in on two sides or more, at the height a touching box stands at, is that
-    # surface seen through a gap in a load (a carton missing): a level, not a box.
+    # A top walled in on two sides or more, at the height two touching boxes stand at, is
+    # that surface seen through a gap in a load (a carton missing): a level, not a box.
     for i, box in enumerate(boxes):
         assert box.rect is not None
-        if box.rect.hidden_sides >= 2 and any(
-            k != i
-            and other.stands_on is not box
-            and other.base_m > 0
-            and abs(other.base_m - box.height_m) < max(box.tolerance_m, 0.004)
-            and _touch(box, other)
-            for k, other in enumerate(boxes)
+        if (
+            box.rect.hidden_sides >= 2
+            and sum(
+                k != i
+                and other.stands_on is not box
+                and other.base_m > 0
+                and abs(other.base_m - box.height_m) < max(box.tolerance_m, 0.004)
+                and _touch(box, other)
+                for k, other in enumerate(boxes)
+            )
+            >= 2
         ):
             box.platform = True
 
