@@ -1549,8 +1549,8 @@ def _next_in_row(lower: _Plateau, upper: _Plateau, side: tuple[float, float], sl
     it meets the whole side, end to end, and the lower top goes out from it as far as a
     carton, not a strip, and the upper would be a slab standing on it (a tall box's faces show
     where it stands). Two cartons of a row side by side, the lower's side hidden by the taller
-    one's rise; a top walled in on three sides or four is a gap in a load, the surface under
-    it, and stays a base."""
+    one's rise. A gap in a load (the surface under it seen where a carton is missing) is as
+    deep as the cartons round it are tall, no slab's step, and stays their base."""
     assert lower.rect is not None and upper.rect is not None
     rect = lower.rect
     ax0, ax1 = rect.axis
