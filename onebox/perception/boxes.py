@@ -123,6 +123,8 @@ HIDDEN_BAND_M = 0.01
 three footprints) has an unknown extent: it is left out."""
 HIDDEN_SHARE = 0.5
 """... and by more than this share of the top's seen extent across the hidden side."""
+LEVEL_TOLERANCE_FLOOR_M = 0.004
+"""Two heights within this of each other are one level (a lid bulges or sags this much)."""
 SLAB = 0.5
 """A box standing less tall over a top than this share of its width would be a slab on it:
 few cartons are (a carton 25 cm wide, less than 12.5 cm over the next one of its row, stands
@@ -1609,7 +1611,7 @@ def _bases(
             + [p.tolerance_m for p in plateaus]
             + [boxes[i].tolerance_m for i in ledged]
         ),
-        0.004,
+        LEVEL_TOLERANCE_FLOOR_M,
     )
     label_height = np.full(max(p.label for p in plateaus) + 1, np.nan)
     label_height[[p.label for p in plateaus]] = [p.height_m for p in plateaus]
@@ -1808,6 +1810,7 @@ def _bases(
     # undecided) takes the higher base of a touching box of its height, when a level there
     # that is no box's top (a platform's) may reach under it.
     is_box_top = np.array([level is not None and level.is_box for level in levels])
+    level_index = np.arange(len(levels))
     weak |= {i for i in range(len(boxes)) if i not in base}
     for _ in range(3):
         changed = False
@@ -1828,7 +1831,7 @@ def _bases(
                 same = np.flatnonzero(
                     allowed[:, low]
                     & (np.abs(level_h - level_h[theirs]) < level_tol[theirs])
-                    & (~is_box_top | (np.arange(len(levels)) == theirs))
+                    & (~is_box_top | (level_index == theirs))
                 )
                 if len(same):
                     current = base[low] = int(same[np.argmax(matches[same, low])])
@@ -1863,7 +1866,7 @@ def _bases(
                 k != i
                 and other.stands_on is not box
                 and other.base_m > 0
-                and abs(other.base_m - box.height_m) < max(box.tolerance_m, 0.004)
+                and abs(other.base_m - box.height_m) < max(box.tolerance_m, LEVEL_TOLERANCE_FLOOR_M)
                 and _touch(box, other)
                 for k, other in enumerate(boxes)
             )
