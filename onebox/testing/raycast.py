@@ -217,12 +217,16 @@ def box_on(
 @dataclass(frozen=True)
 class Scene:
     """What the camera sees: a plane (optional) and shapes; ``seam_m`` darkens box top edges
-    that wide in the colour picture, as a carton's edge and the seam between two cartons."""
+    that wide in the colour picture (to ``seam_shade`` of their colour), as a carton's edge and
+    the seam between two cartons; ``seam_fades``: the darkening fades in across ``seam_m``, as
+    the shadow in a seam does, with no sharp step."""
 
     camera: Camera
     plane: Plane | None = field(default_factory=Plane)
     shapes: tuple[Shape, ...] = ()
     seam_m: float = 0.001
+    seam_shade: float = 0.45
+    seam_fades: bool = False
 
     @property
     def boxes(self) -> list[Box]:
@@ -378,7 +382,10 @@ def render(scene: Scene) -> tuple[Float32Array, npt.NDArray[np.uint8]]:
                 with np.errstate(divide="ignore", invalid="ignore"):
                     t = np.where(on_top & np.isfinite(t), t + bump / along, t)
             rim = np.minimum(half[0] - np.abs(local[..., 0]), half[1] - np.abs(local[..., 1]))
-            dark = np.where(on_top & (rim < scene.seam_m), 0.45, 1.0)
+            fade = np.clip(rim / scene.seam_m, 0.0, 1.0) if scene.seam_fades else 0.0
+            dark = np.where(
+                on_top & (rim < scene.seam_m), 1.0 - (1.0 - scene.seam_shade) * (1.0 - fade), 1.0
+            )
         elif isinstance(shape_, Cylinder):
             t, nrm = _hit_cylinder(origin, dirs, shape_)
             dark = np.ones(shape)
