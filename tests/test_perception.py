@@ -201,6 +201,41 @@ def test_wide_seam_band_split_down_its_middle(distance_m):
         assert math.dist(box.centre, true.centre) < 0.002 * distance_m / 0.4
 
 
+@pytest.mark.parametrize(
+    ("distance_m", "tilt_deg", "turn_deg", "seam_m", "noisy"),
+    [
+        (0.6, 10.0, 0.0, 0.005, False),
+        (0.8, 20.0, 60.0, 0.005, False),
+        (1.5, 20.0, 10.0, 0.012, True),
+    ],
+)
+def test_cartons_of_one_shade_split_at_the_seams_shadow(
+    distance_m, tilt_deg, turn_deg, seam_m, noisy
+):
+    """Two cartons of one colour end to end, the seam between them a shadow that fades in
+    over a few pixels (no step between neighbours is a colour edge): one top until the seam's
+    line is seen crossing it, then two cartons of their own size."""
+    plane = Plane()
+    size = (0.3, 0.2, 0.2) if noisy else (0.12, 0.08, 0.06)
+    along = np.array([math.cos(math.radians(turn_deg)), math.sin(math.radians(turn_deg))])
+    a, b = (
+        box_on(plane, *(s * size[0] / 2 * along), size, turn_deg, colour=(170, 130, 80))
+        for s in (-1.0, 1.0)
+    )
+    camera = Camera.tilted(distance_m, tilt_deg, width=640, height=480)
+    scene = Scene(camera, plane, (a, b), seam_m=seam_m, seam_shade=0.7, seam_fades=True)
+    depth, colour = render(scene)
+    if noisy:
+        depth = add_noise(depth, Noise.d435(), np.random.default_rng(3))
+    found = find_boxes(depth, camera.lens, camera.camera_to_world, colour)
+    assert len(found.boxes) == 2, [box.size for box in found.boxes]
+    bound = 0.003 if not noisy else 0.012
+    for box, true in match(found.boxes, (a, b)):
+        assert math.dist(box.centre[:2], true.centre[:2]) < bound
+        assert box.size[0] == pytest.approx(size[0], abs=bound)
+        assert box.size[2] == pytest.approx(size[2], abs=0.005)
+
+
 @pytest.mark.parametrize("tilt_deg", [0.0, 25.0])
 def test_without_pose_sizes_match(tilt_deg):
     """No pose: the camera-frame answer has the same sizes, and the support faces the camera."""

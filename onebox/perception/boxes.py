@@ -29,7 +29,12 @@ How a picture is read (whole-array work; Python loops only over tops, a few scal
    pixel, what lies past it: rising (hidden by something standing on or in front of the top,
    also when first seen past a band of no reading), dropping (a real edge) or no reading
    (dropout). Every rectangle is fitted in one batched
-   pass (:func:`onebox.perception.rectangle.fit_rectangles`).
+   pass (:func:`onebox.perception.rectangle.fit_rectangles`). A top that a straight line of
+   colour edges or of a dark valley a few pixels wide (a seam's shadow, with no step between
+   neighbours as large as an edge's) crosses from side to side, parallel to one of its
+   rectangle's sides and at least 3 cm from either end, with the top going on past it on
+   both sides along 80 % of it, is two cartons of one shade: it splits there, each half at
+   its own height, and they are measured again (up to three times: rows of cartons).
 5. Not a box: a top touching the picture's border (cut off), smaller than ``min_top_area_m2``
    (or (3 sigma)^2 where the depth is noisy), seen narrower than 1 cm, not parallel to the
    support (a top narrower than its noise: by its plane along the rays, if it stands free),
@@ -384,9 +389,12 @@ def _plateaus(
             stand &= h < np.float32(settings.max_height_m)
     cut = segment.breaks(h, step)
     colour_cut: BoolArray | None = None
+    grey = None
     if colour is not None:
-        colour_cut = np.pad(segment.colour_breaks(colour[crop], settings.colour_step), pad)
+        grey = segment.grey(colour[crop])
+        colour_cut = np.pad(segment.colour_breaks(grey, settings.colour_step), pad)
         cut |= colour_cut
+        grey = np.pad(grey, pad, mode="edge")
     labels, count = ndimage.label(stand & ~cut)
     if count == 0:
         return [], height, labels_top
@@ -466,7 +474,6 @@ def _plateaus(
             rest = candidates[top_flat[candidates] == 0]
             _grow(top_flat, rest, h_flat, own_level, below, width_p, None, reach)
     tops = _Tops.gather(top_lab, tops_n, PAD, (r0, c0))
-    labels_top[crop] = top_lab[PAD:-PAD, PAD:-PAD]
     plateaus = _measure_all(
         tops,
         top_flat,
@@ -483,6 +490,41 @@ def _plateaus(
         settings,
         depth.shape,
     )
+    for _ in range(SEAM_ROUNDS):
+        if colour_cut is None or grey is None:
+            break
+        halves = _seams(
+            plateaus,
+            tops,
+            s_flat,
+            colour_cut.reshape(-1),
+            grey.reshape(-1),
+            settings.colour_step,
+            lens,
+            support,
+            depth.shape,
+        )
+        if not halves:
+            break
+        level, tol, tops_n = _split_tops(top_flat, tops, halves, level, tol, h_flat, p_idx, p_top)
+        tops = _Tops.gather(top_lab, tops_n, PAD, (r0, c0))
+        plateaus = _measure_all(
+            tops,
+            top_flat,
+            h_flat,
+            d_flat,
+            s_flat,
+            level,
+            tol,
+            p_idx,
+            p_top,
+            p_h,
+            lens,
+            support,
+            settings,
+            depth.shape,
+        )
+    labels_top[crop] = top_lab[PAD:-PAD, PAD:-PAD]
     return plateaus, height, labels_top
 
 
@@ -1085,6 +1127,115 @@ def _measure_all(
             continue
         p.is_box = True
     return plateaus
+
+
+SEAM_ROUNDS = 3
+"""A top is split at most this many times over (three, four cartons in a row)."""
+SEAM_BIN = 1.5
+"""A seam's bins, footprints: a tilted camera's pixels lie farther apart one way."""
+
+
+def _split_tops(
+    top_flat: npt.NDArray[np.int32],
+    tops: _Tops,
+    halves: list[tuple[int, npt.NDArray[np.intp]]],
+    level: Float64Array,
+    tol: Float64Array,
+    h_flat: Float32Array,
+    p_idx: npt.NDArray[np.intp],
+    p_top: npt.NDArray[np.int32],
+) -> tuple[Float64Array, Float64Array, int]:
+    """Two cartons of one shade whose seam's colour line breaks for a pixel or two grew into one
+    top: each half past the seam (from :func:`_seams`) becomes a top of its own, and so does
+    each connected part of a half (a load's cartons round a missing one). ``top_flat`` and
+    ``p_top`` are relabelled in place; returns the levels and tolerances, one per top, and the
+    number of tops."""
+    before = len(level)
+    count = before
+    parents = []
+    for t, half in halves:
+        part = slice(int(tops.starts[t]), int(tops.starts[t] + tops.counts[t]))
+        rest = np.setdiff1d(tops.flat[part], half, assume_unique=True)
+        for pixels in (rest, half):
+            pieces = _connected(pixels, tops.width)
+            keep = max(range(len(pieces)), key=lambda k: len(pieces[k])) if pixels is rest else -1
+            for k, piece in enumerate(pieces):
+                if k == keep or len(piece) < 6:
+                    continue
+                top_flat[piece] = count + 1
+                parents.append(t)
+                count += 1
+    moved = top_flat[p_idx] > before
+    p_top[moved] = top_flat[p_idx[moved]] - 1
+    level = np.concatenate([level, level[parents]])
+    tol = np.concatenate([tol, tol[parents]])
+    # Each part at its own height: under a stereo camera's noise a step of a centimetre or two
+    # between two cartons may be what the depth could not see.
+    split = np.unique(np.concatenate([[t for t, _ in halves], np.arange(before, count)]))
+    on = np.flatnonzero(np.isin(top_flat, (split + 1).astype(np.int32)))
+    own = _levels(h_flat[on], top_flat[on] - 1, count, tol)
+    level[split] = own[split]
+    return level, tol, count
+
+
+def _connected(flat: npt.NDArray[np.intp], width: int) -> list[npt.NDArray[np.intp]]:
+    """The 4-connected parts of a set of pixels (flat indices in a picture ``width`` wide)."""
+    if len(flat) == 0:
+        return []
+    r, c = np.divmod(flat, width)
+    r0, c0 = int(r.min()), int(c.min())
+    mask = np.zeros((int(r.max()) - r0 + 1, int(c.max()) - c0 + 1), dtype=bool)
+    mask[r - r0, c - c0] = True
+    labels, n = ndimage.label(mask)
+    if n <= 1:
+        return [flat]
+    which = labels[r - r0, c - c0]
+    return [flat[which == k] for k in range(1, n + 1)]
+
+
+def _seams(
+    plateaus: list[_Plateau],
+    tops: _Tops,
+    s_flat: Float32Array,
+    cut_flat: BoolArray,
+    grey_flat: npt.NDArray[np.int16],
+    colour_step: float,
+    lens: Intrinsics,
+    support: Support,
+    shape: tuple[int, int],
+) -> list[tuple[int, npt.NDArray[np.intp]]]:
+    """Tops that a straight colour line crosses from side to side, parallel to a side of their
+    rectangle, with the top going on past it on both sides (the seam between two cartons of one
+    shade): per such top, its label and the crop's flat indices of the pixels past the line."""
+    rows_n, cols_n = shape
+    across, down = lens.rays(cols_n, rows_n)
+    basis = _plane_basis(support, None)
+    found: list[tuple[int, npt.NDArray[np.intp]]] = []
+    for p in plateaus:
+        if p.rect is None or p.rect.length_m < 2.0 * segment.SEAM_MIN_M:
+            continue
+        t = p.label
+        part = slice(int(tops.starts[t]), int(tops.starts[t] + tops.counts[t]))
+        flat = tops.flat[part]
+        shade = grey_flat[flat]
+        cut = cut_flat[flat] | segment.valleys(grey_flat, flat, tops.width, colour_step)
+        if np.count_nonzero(cut) * p.footprint_m < segment.SEAM_MIN_M:
+            continue
+        # Each pixel's ray met with the top's plane, not its reading: a stereo camera's noise
+        # along the ray would smear the line over several footprints.
+        d = (p.height_m - support.offset_camera_m) / s_flat[flat].astype(np.float64)
+        x, y = across[tops.cols[part]] * d, down[tops.rows[part]] * d
+        pa = basis[0, 0] * x + basis[0, 1] * y + basis[0, 2] * d
+        pb = basis[1, 0] * x + basis[1, 1] * y + basis[1, 2] * d
+        ax, ay = p.rect.axis
+        for cx, cy in ((ax, ay), (-ay, ax)):
+            u = pa * cx + pb * cy
+            v = pb * cx - pa * cy
+            at = segment.seam_at(u, v, cut, shade, colour_step, SEAM_BIN * p.footprint_m)
+            if at is not None:
+                found.append((t, flat[u > at]))
+                break
+    return found
 
 
 HUG_SHARE = 0.85

@@ -13,6 +13,9 @@ slices. Whole-array work only; the caller loops over the (few) pieces.
 - Touching cartons of one height leave no step that noisy depth can see; where a colour picture
   is given, a brightness change larger than ``colour_step`` between neighbours is a break too
   (both pixels cut); the top regrows into the cut pixels afterwards, from both sides.
+- Where such a line breaks for a pixel, or the seam is only a shadow darkening over a few
+  pixels, two cartons are one top: :func:`seam_at` finds the straight line of colour edges and
+  dark valleys (:func:`valleys`) that crosses a top, for the caller to split it there.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ import numpy.typing as npt
 from scipy import ndimage
 
 Float32Array = npt.NDArray[np.float32]
+Float64Array = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
 IntArray = npt.NDArray[np.int32]
 
@@ -46,13 +50,17 @@ def breaks(height_m: Float32Array, step_m: Float32Array | np.float32) -> BoolArr
     return cut
 
 
-def colour_breaks(colour: npt.NDArray[np.uint8], step: float) -> BoolArray:
-    """Pixels on either side of a brightness change larger than ``step`` (0..255 levels)."""
-    # Integer luma (weights 77, 150, 29 over 256): one pass in 16 bits, no float picture.
+def grey(colour: npt.NDArray[np.uint8]) -> npt.NDArray[np.int16]:
+    """Integer luma (weights 77, 150, 29 over 256): one pass in 16 bits, no float picture."""
     grey16 = colour[..., 0].astype(np.uint16) * np.uint16(77)
     grey16 += colour[..., 1].astype(np.uint16) * np.uint16(150)
     grey16 += colour[..., 2].astype(np.uint16) * np.uint16(29)
-    grey = (grey16 >> 8).astype(np.int16)
+    return (grey16 >> 8).astype(np.int16)
+
+
+def colour_breaks(grey: npt.NDArray[np.int16], step: float) -> BoolArray:
+    """Pixels on either side of a brightness change larger than ``step`` (0..255 levels)
+    between neighbours, in a picture from :func:`grey`."""
     limit = np.int16(int(step))
     cut = np.zeros(grey.shape, dtype=bool)
     across = np.abs(grey[:, 1:] - grey[:, :-1]) > limit
@@ -70,3 +78,102 @@ def pieces(
     """Connected standing pixels (4-neighbours) once the cut pixels are removed."""
     labels, count = ndimage.label(standing & ~cut)
     return labels.astype(np.int32, copy=False), int(count), ndimage.find_objects(labels)
+
+
+SEAM_COVER = 0.8
+"""A colour line is a seam where it runs along this share of the top seen on both its sides."""
+SEAM_MIN_M = 0.03
+"""The shortest seam, and the least a top goes on past it on each side, metres."""
+SEAM_SIDE_PX = 5
+"""How far past a seam (bins) the top must go on, on both sides."""
+SEAM_VALLEY_PX = (2, 3, 4)
+"""How far each side of a pixel a dark line's shoulders are looked for: a seam's shadow is a
+valley a few pixels wide, with no neighbour-to-neighbour step as large as a colour edge's."""
+
+
+def valleys(
+    grey_flat: npt.NDArray[np.int16], flat: npt.NDArray[np.intp], width: int, step: float
+) -> BoolArray:
+    """Pixels darker by more than ``step`` than the pixels a few either side of them, across or
+    down: on a dark line."""
+    here = grey_flat[flat]
+    dark = np.zeros(len(flat), dtype=bool)
+    for k in SEAM_VALLEY_PX:
+        for offset in (k, k * width):
+            shoulders = np.minimum(grey_flat[flat - offset], grey_flat[flat + offset])
+            dark |= shoulders - here > step
+    return dark
+
+
+def seam_at(
+    u: Float64Array,
+    v: Float64Array,
+    cut: BoolArray,
+    shade: npt.NDArray[np.int16],
+    step: float,
+    bin_m: float,
+) -> float | None:
+    """Where along ``u`` a line of ``cut`` points (a top's pixels at (u, v) in its plane, on
+    colour edges or dark lines) crosses the top at right angles, with the top going on past
+    it on both sides in one ``shade`` (within two ``step``: two cartons of one kind, not a top
+    and something darker beside it within the depth's noise): the middle of the line, or None.
+    Counted in square bins ``bin_m`` wide."""
+    iu = ((u - u.min()) / bin_m).astype(np.intp)
+    nu = int(iu.max()) + 1
+    side = SEAM_SIDE_PX
+    if nu <= 2 * side + 1:
+        return None
+    # A quick look first: a line must hold, within a bin either side, as many points as run
+    # across the top (half as many, for the bins' staircase), somewhere away from the ends.
+    across = np.bincount(iu, minlength=nu)
+    on_line = np.bincount(iu[cut], minlength=nu)
+    near = on_line.copy()
+    near[1:] += on_line[:-1]
+    near[:-1] += on_line[1:]
+    if not (near[side:-side] >= 0.5 * SEAM_COVER * across[side:-side]).any():
+        return None
+    iv = ((v - v.min()) / bin_m).astype(np.intp)
+    nv = int(iv.max()) + 1
+    seen = np.zeros((nu + 2 * side + 2, nv), dtype=bool)
+    seen[iu[~cut] + side + 1, iv[~cut]] = True
+    lines = np.zeros((nu + 2, nv), dtype=bool)
+    lines[iu[cut] + 1, iv[cut]] = True
+    line = lines[:-2] | lines[1:-1] | lines[2:]  # the cut within one bin of each u
+    total = np.cumsum(seen, axis=0, dtype=np.int32)
+    # total[k] counts seen bins up to padded row k; bin i is padded row i + side + 1.
+    i = np.arange(nu)
+    before = total[i + side - 1] - total[i] > 0  # bins i - side .. i - 2
+    after = total[i + 2 * side + 1] - total[i + side + 2] > 0  # bins i + 2 .. i + side
+    both = before & after
+    n_both = both.sum(axis=1)
+    n_line = (line & both).sum(axis=1)
+    # The mean shade of the points on each side, over the same bins.
+    at = iu[~cut] + side + 1
+    size = nu + 2 * side + 2
+    sums = np.stack(
+        [
+            np.bincount(at, weights=shade[~cut], minlength=size),
+            np.bincount(at, minlength=size).astype(np.float64),
+        ]
+    )
+    acc = np.cumsum(sums, axis=1)
+    low = acc[:, i + side - 1] - acc[:, i]
+    high = acc[:, i + 2 * side + 1] - acc[:, i + side + 2]
+    gap = np.abs(low[0] / np.maximum(low[1], 1.0) - high[0] / np.maximum(high[1], 1.0))
+    ok = (n_both * bin_m >= SEAM_MIN_M) & (n_line >= SEAM_COVER * n_both) & (gap <= 2.0 * step)
+    # Each side a carton's worth, not a rim's band (a carton's edge printed darker).
+    ok &= (np.minimum(i + 0.5, nu - i - 0.5) * bin_m) >= SEAM_MIN_M
+    if not ok.any():
+        return None
+    share = np.where(ok, n_line / np.maximum(n_both, 1), -1.0)
+    best = int(np.argmax(share))
+    # The line is a few bins wide (a shadow's valley, both pixels of a colour edge): its
+    # middle is the middle of its points in the run of bins as good as the best.
+    good = share >= share[best] - 0.1
+    first, last = best, best
+    while first > 0 and good[first - 1]:
+        first -= 1
+    while last < nu - 1 and good[last + 1]:
+        last += 1
+    on = cut & (iu >= first - 1) & (iu <= last + 1)
+    return float(np.median(u[on]))
