@@ -29,12 +29,13 @@ How a picture is read (whole-array work; Python loops only over tops, a few scal
    pixel, what lies past it: rising (hidden by something standing on or in front of the top,
    also when first seen past a band of no reading), dropping (a real edge) or no reading
    (dropout). Every rectangle is fitted in one batched
-   pass (:func:`onebox.perception.rectangle.fit_rectangles`). A top that a straight line of
-   colour edges or of a dark valley a few pixels wide (a seam's shadow, with no step between
-   neighbours as large as an edge's) crosses from side to side, parallel to one of its
-   rectangle's sides and at least 3 cm from either end, with the top going on past it on
-   both sides along 80 % of it, is two cartons of one shade: it splits there, each half at
-   its own height, and they are measured again (up to three times: rows of cartons).
+   pass (:func:`onebox.perception.rectangle.fit_rectangles`). A top that straight lines of
+   colour edges or of dark valleys a few pixels wide (a seam's shadow, with no step between
+   neighbours as large as an edge's) cross from side to side, parallel to its rectangle's
+   sides and at least 3 cm from either end, with the top going on past them in one shade on
+   both sides along 80 % of them, is cartons of one shade: it splits at every such line at
+   once (rows and columns), each connected part at its own height, and the tops are measured
+   again (a second look finds a seam that crosses one part only).
 5. Not a box: a top touching the picture's border (cut off), smaller than ``min_top_area_m2``
    (or (3 sigma)^2 where the depth is noisy), seen narrower than 1 cm, not parallel to the
    support (a top narrower than its noise: by its plane along the rays, if it stands free),
@@ -493,7 +494,7 @@ def _plateaus(
     for _ in range(SEAM_ROUNDS):
         if colour_cut is None or grey is None:
             break
-        halves = _seams(
+        cells = _seams(
             plateaus,
             tops,
             s_flat,
@@ -504,9 +505,9 @@ def _plateaus(
             support,
             depth.shape,
         )
-        if not halves:
+        if not cells:
             break
-        level, tol, tops_n = _split_tops(top_flat, tops, halves, level, tol, h_flat, p_idx, p_top)
+        level, tol, tops_n = _split_tops(top_flat, tops, cells, level, tol, h_flat, p_idx, p_top)
         tops = _Tops.gather(top_lab, tops_n, PAD, (r0, c0))
         plateaus = _measure_all(
             tops,
@@ -1129,8 +1130,9 @@ def _measure_all(
     return plateaus
 
 
-SEAM_ROUNDS = 3
-"""A top is split at most this many times over (three, four cartons in a row)."""
+SEAM_ROUNDS = 2
+"""Tops are looked over for seams at most this many times (every seam across a top is split at
+once; a seam that only runs across one of the parts shows after)."""
 SEAM_BIN = 1.5
 """A seam's bins, footprints: a tilted camera's pixels lie farther apart one way."""
 
@@ -1138,40 +1140,41 @@ SEAM_BIN = 1.5
 def _split_tops(
     top_flat: npt.NDArray[np.int32],
     tops: _Tops,
-    halves: list[tuple[int, npt.NDArray[np.intp]]],
+    cells: list[tuple[int, npt.NDArray[np.intp]]],
     level: Float64Array,
     tol: Float64Array,
     h_flat: Float32Array,
     p_idx: npt.NDArray[np.intp],
     p_top: npt.NDArray[np.int32],
 ) -> tuple[Float64Array, Float64Array, int]:
-    """Two cartons of one shade whose seam's colour line breaks for a pixel or two grew into one
-    top: each half past the seam (from :func:`_seams`) becomes a top of its own, and so does
-    each connected part of a half (a load's cartons round a missing one). ``top_flat`` and
-    ``p_top`` are relabelled in place; returns the levels and tolerances, one per top, and the
-    number of tops."""
+    """Cartons of one shade whose seams' colour lines break for a pixel or two grew into one
+    top: each cell between the seams (from :func:`_seams`: per top, each of its pixels' cell)
+    becomes a top of its own, and so does each connected part of a cell (a load's cartons round
+    a missing one); the largest part keeps the top's label. ``top_flat`` and ``p_top`` are
+    relabelled in place; returns the levels and tolerances, one per top, and the number of
+    tops."""
     before = len(level)
     count = before
     parents = []
-    for t, half in halves:
-        part = slice(int(tops.starts[t]), int(tops.starts[t] + tops.counts[t]))
-        rest = np.setdiff1d(tops.flat[part], half, assume_unique=True)
-        for pixels in (rest, half):
-            pieces = _connected(pixels, tops.width)
-            keep = max(range(len(pieces)), key=lambda k: len(pieces[k])) if pixels is rest else -1
-            for k, piece in enumerate(pieces):
-                if k == keep or len(piece) < 6:
-                    continue
-                top_flat[piece] = count + 1
-                parents.append(t)
-                count += 1
+    for t, cell in cells:
+        flat = tops.flat[int(tops.starts[t]) : int(tops.starts[t] + tops.counts[t])]
+        pieces = [
+            piece for c in np.unique(cell) for piece in _connected(flat[cell == c], tops.width)
+        ]
+        biggest = max(range(len(pieces)), key=lambda k: len(pieces[k]))
+        for k, piece in enumerate(pieces):
+            if k == biggest or len(piece) < 6:
+                continue
+            top_flat[piece] = count + 1
+            parents.append(t)
+            count += 1
     moved = top_flat[p_idx] > before
     p_top[moved] = top_flat[p_idx[moved]] - 1
     level = np.concatenate([level, level[parents]])
     tol = np.concatenate([tol, tol[parents]])
     # Each part at its own height: under a stereo camera's noise a step of a centimetre or two
     # between two cartons may be what the depth could not see.
-    split = np.unique(np.concatenate([[t for t, _ in halves], np.arange(before, count)]))
+    split = np.unique(np.concatenate([[t for t, _ in cells], np.arange(before, count)]))
     on = np.flatnonzero(np.isin(top_flat, (split + 1).astype(np.int32)))
     own = _levels(h_flat[on], top_flat[on] - 1, count, tol)
     level[split] = own[split]
@@ -1204,9 +1207,10 @@ def _seams(
     support: Support,
     shape: tuple[int, int],
 ) -> list[tuple[int, npt.NDArray[np.intp]]]:
-    """Tops that a straight colour line crosses from side to side, parallel to a side of their
-    rectangle, with the top going on past it on both sides (the seam between two cartons of one
-    shade): per such top, its label and the crop's flat indices of the pixels past the line."""
+    """Tops that straight colour lines cross from side to side, parallel to a side of their
+    rectangle, with the top going on past them on both sides (the seams between cartons of one
+    shade, along and across): per such top, its label and each of its pixels' cell between the
+    lines (0, 1, ...)."""
     rows_n, cols_n = shape
     across, down = lens.rays(cols_n, rows_n)
     basis = _plane_basis(support, None)
@@ -1228,13 +1232,13 @@ def _seams(
         pa = basis[0, 0] * x + basis[0, 1] * y + basis[0, 2] * d
         pb = basis[1, 0] * x + basis[1, 1] * y + basis[1, 2] * d
         ax, ay = p.rect.axis
-        for cx, cy in ((ax, ay), (-ay, ax)):
-            u = pa * cx + pb * cy
-            v = pb * cx - pa * cy
-            at = segment.seam_at(u, v, cut, shade, colour_step, SEAM_BIN * p.footprint_m)
-            if at is not None:
-                found.append((t, flat[u > at]))
-                break
+        u, v = pa * ax + pb * ay, pb * ax - pa * ay
+        bin_m = SEAM_BIN * p.footprint_m
+        at_u = segment.seam_lines(u, v, cut, shade, colour_step, bin_m)
+        at_v = segment.seam_lines(v, u, cut, shade, colour_step, bin_m)
+        if at_u or at_v:
+            cell = np.searchsorted(at_u, u) * (len(at_v) + 1) + np.searchsorted(at_v, v)
+            found.append((t, cell))
     return found
 
 

@@ -14,7 +14,7 @@ slices. Whole-array work only; the caller loops over the (few) pieces.
   is given, a brightness change larger than ``colour_step`` between neighbours is a break too
   (both pixels cut); the top regrows into the cut pixels afterwards, from both sides.
 - Where such a line breaks for a pixel, or the seam is only a shadow darkening over a few
-  pixels, two cartons are one top: :func:`seam_at` finds the straight line of colour edges and
+  pixels, two cartons are one top: :func:`seam_lines` finds the straight line of colour edges and
   dark valleys (:func:`valleys`) that crosses a top, for the caller to split it there.
 """
 
@@ -105,24 +105,24 @@ def valleys(
     return dark
 
 
-def seam_at(
+def seam_lines(
     u: Float64Array,
     v: Float64Array,
     cut: BoolArray,
     shade: npt.NDArray[np.int16],
     step: float,
     bin_m: float,
-) -> float | None:
-    """Where along ``u`` a line of ``cut`` points (a top's pixels at (u, v) in its plane, on
+) -> list[float]:
+    """Where along ``u`` lines of ``cut`` points (a top's pixels at (u, v) in its plane, on
     colour edges or dark lines) crosses the top at right angles, with the top going on past
     it on both sides in one ``shade`` (within two ``step``: two cartons of one kind, not a top
-    and something darker beside it within the depth's noise): the middle of the line, or None.
-    Counted in square bins ``bin_m`` wide."""
+    and something darker beside it within the depth's noise): each line's middle, ascending,
+    a carton's worth apart. Counted in square bins ``bin_m`` wide."""
     iu = ((u - u.min()) / bin_m).astype(np.intp)
     nu = int(iu.max()) + 1
     side = SEAM_SIDE_PX
     if nu <= 2 * side + 1:
-        return None
+        return []
     # A quick look first: a line must hold, within a bin either side, as many points as run
     # across the top (half as many, for the bins' staircase), somewhere away from the ends.
     across = np.bincount(iu, minlength=nu)
@@ -131,7 +131,7 @@ def seam_at(
     near[1:] += on_line[:-1]
     near[:-1] += on_line[1:]
     if not (near[side:-side] >= 0.5 * SEAM_COVER * across[side:-side]).any():
-        return None
+        return []
     iv = ((v - v.min()) / bin_m).astype(np.intp)
     nv = int(iv.max()) + 1
     seen = np.zeros((nu + 2 * side + 2, nv), dtype=bool)
@@ -164,16 +164,19 @@ def seam_at(
     # Each side a carton's worth, not a rim's band (a carton's edge printed darker).
     ok &= (np.minimum(i + 0.5, nu - i - 0.5) * bin_m) >= SEAM_MIN_M
     if not ok.any():
-        return None
+        return []
     share = np.where(ok, n_line / np.maximum(n_both, 1), -1.0)
-    best = int(np.argmax(share))
-    # The line is a few bins wide (a shadow's valley, both pixels of a colour edge): its
-    # middle is the middle of its points in the run of bins as good as the best.
-    good = share >= share[best] - 0.1
-    first, last = best, best
-    while first > 0 and good[first - 1]:
-        first -= 1
-    while last < nu - 1 and good[last + 1]:
-        last += 1
-    on = cut & (iu >= first - 1) & (iu <= last + 1)
-    return float(np.median(u[on]))
+    # Each run of good bins is one line, a few bins wide (a shadow's valley, both pixels of a
+    # colour edge): its middle is the middle of its points in the bins as good as its best.
+    lines_at: list[float] = []
+    starts = np.flatnonzero(ok & ~np.concatenate([[False], ok[:-1]]))
+    stops = np.flatnonzero(ok & ~np.concatenate([ok[1:], [False]]))
+    for first, last in zip(starts, stops, strict=True):
+        run = share[first : last + 1]
+        good = np.flatnonzero(run >= run.max() - 0.1) + first
+        on = cut & (iu >= good[0] - 1) & (iu <= good[-1] + 1)
+        middle = float(np.median(u[on]))
+        if lines_at and middle - lines_at[-1] < SEAM_MIN_M:
+            continue  # a carton's worth from the last line, or none (two edges of one band)
+        lines_at.append(middle)
+    return lines_at
