@@ -474,40 +474,9 @@ def _plateaus(
             own_level = np.where(alone & ~ring, level, np.nan)
             rest = candidates[top_flat[candidates] == 0]
             _grow(top_flat, rest, h_flat, own_level, below, width_p, None, reach)
-    tops = _Tops.gather(top_lab, tops_n, PAD, (r0, c0))
-    plateaus = _measure_all(
-        tops,
-        top_flat,
-        h_flat,
-        d_flat,
-        s_flat,
-        level,
-        tol,
-        p_idx,
-        p_top,
-        p_h,
-        lens,
-        support,
-        settings,
-        depth.shape,
-    )
-    for _ in range(SEAM_ROUNDS):
-        if colour_cut is None or grey is None:
-            break
-        cells = _seams(
-            plateaus,
-            tops,
-            s_flat,
-            colour_cut.reshape(-1),
-            grey.reshape(-1),
-            settings.colour_step,
-            lens,
-            support,
-            depth.shape,
-        )
-        if not cells:
-            break
-        level, tol, tops_n = _split_tops(top_flat, tops, cells, level, tol, h_flat, p_idx, p_top)
+    # Measured, then looked over for seams between cartons of one shade (colour only), split
+    # and measured again.
+    for look in range(SEAM_ROUNDS + 1):
         tops = _Tops.gather(top_lab, tops_n, PAD, (r0, c0))
         plateaus = _measure_all(
             tops,
@@ -525,6 +494,22 @@ def _plateaus(
             settings,
             depth.shape,
         )
+        if look == SEAM_ROUNDS or colour_cut is None or grey is None:
+            break
+        cells = _seams(
+            plateaus,
+            tops,
+            s_flat,
+            colour_cut.reshape(-1),
+            grey.reshape(-1),
+            settings.colour_step,
+            lens,
+            support,
+            depth.shape,
+        )
+        if not cells:
+            break
+        level, tol, tops_n = _split_tops(top_flat, tops, cells, level, tol, h_flat, p_idx, p_top)
     labels_top[crop] = top_lab[PAD:-PAD, PAD:-PAD]
     return plateaus, height, labels_top
 
@@ -1207,10 +1192,10 @@ def _seams(
     support: Support,
     shape: tuple[int, int],
 ) -> list[tuple[int, npt.NDArray[np.intp]]]:
-    """Tops that straight colour lines cross from side to side, parallel to a side of their
-    rectangle, with the top going on past them on both sides (the seams between cartons of one
-    shade, along and across): per such top, its label and each of its pixels' cell between the
-    lines (0, 1, ...)."""
+    """Tops that straight lines of colour edges or dark valleys cross from side to side,
+    parallel to a side of their rectangle, with the top going on past them on both sides (the
+    seams between cartons of one shade, along and across): per such top, its label and each of
+    its pixels' cell between the lines (0, 1, ...)."""
     rows_n, cols_n = shape
     across, down = lens.rays(cols_n, rows_n)
     basis = _plane_basis(support, None)

@@ -14,8 +14,8 @@ slices. Whole-array work only; the caller loops over the (few) pieces.
   is given, a brightness change larger than ``colour_step`` between neighbours is a break too
   (both pixels cut); the top regrows into the cut pixels afterwards, from both sides.
 - Where such a line breaks for a pixel, or the seam is only a shadow darkening over a few
-  pixels, two cartons are one top: :func:`seam_lines` finds the straight line of colour edges and
-  dark valleys (:func:`valleys`) that crosses a top, for the caller to split it there.
+  pixels, two cartons are one top: :func:`seam_lines` finds the straight lines of colour edges
+  and dark valleys (:func:`valleys`) that cross a top, for the caller to split it there.
 """
 
 from __future__ import annotations
