@@ -84,7 +84,7 @@ SEAM_COVER = 0.8
 """A colour line is a seam where it runs along this share of the top seen on both its sides."""
 SEAM_MIN_M = 0.03
 """The shortest seam, and the least a top goes on past it on each side, metres."""
-SEAM_SIDE_PX = 5
+SEAM_SIDE_BINS = 5
 """How far past a seam (bins) the top must go on, on both sides."""
 SEAM_VALLEY_PX = (2, 3, 4)
 """How far each side of a pixel a dark line's shoulders are looked for: a seam's shadow is a
@@ -114,13 +114,13 @@ def seam_lines(
     bin_m: float,
 ) -> list[float]:
     """Where along ``u`` lines of ``cut`` points (a top's pixels at (u, v) in its plane, on
-    colour edges or dark lines) crosses the top at right angles, with the top going on past
+    colour edges or dark lines) cross the top at right angles, with the top going on past
     it on both sides in one ``shade`` (within two ``step``: two cartons of one kind, not a top
     and something darker beside it within the depth's noise): each line's middle, ascending,
     a carton's worth apart. Counted in square bins ``bin_m`` wide."""
     iu = ((u - u.min()) / bin_m).astype(np.intp)
     nu = int(iu.max()) + 1
-    side = SEAM_SIDE_PX
+    side = SEAM_SIDE_BINS
     if nu <= 2 * side + 1:
         return []
     # A quick look first: a line must hold, within a bin either side, as many points as run
@@ -139,12 +139,16 @@ def seam_lines(
     lines = np.zeros((nu + 2, nv), dtype=bool)
     lines[iu[cut] + 1, iv[cut]] = True
     line = lines[:-2] | lines[1:-1] | lines[2:]  # the cut within one bin of each u
-    total = np.cumsum(seen, axis=0, dtype=np.int32)
-    # total[k] counts seen bins up to padded row k; bin i is padded row i + side + 1.
     i = np.arange(nu)
-    before = total[i + side - 1] - total[i] > 0  # bins i - side .. i - 2
-    after = total[i + 2 * side + 1] - total[i + side + 2] > 0  # bins i + 2 .. i + side
-    both = before & after
+
+    def sides(padded: npt.NDArray[np.float64]) -> tuple[Float64Array, Float64Array]:
+        """Per bin i, ``padded`` (bin i at row i + side + 1) summed over bins i - side .. i - 2
+        and over bins i + 2 .. i + side."""
+        total = np.cumsum(padded, axis=0)
+        return total[i + side - 1] - total[i], total[i + 2 * side + 1] - total[i + side + 2]
+
+    before, after = sides(seen.astype(np.float64))
+    both = (before > 0) & (after > 0)
     n_both = both.sum(axis=1)
     n_line = (line & both).sum(axis=1)
     # The mean shade of the points on each side, over the same bins.
@@ -154,12 +158,11 @@ def seam_lines(
         [
             np.bincount(at, weights=shade[~cut], minlength=size),
             np.bincount(at, minlength=size).astype(np.float64),
-        ]
+        ],
+        axis=1,
     )
-    acc = np.cumsum(sums, axis=1)
-    low = acc[:, i + side - 1] - acc[:, i]
-    high = acc[:, i + 2 * side + 1] - acc[:, i + side + 2]
-    gap = np.abs(low[0] / np.maximum(low[1], 1.0) - high[0] / np.maximum(high[1], 1.0))
+    low, high = sides(sums)
+    gap = np.abs(low[:, 0] / np.maximum(low[:, 1], 1.0) - high[:, 0] / np.maximum(high[:, 1], 1.0))
     ok = (n_both * bin_m >= SEAM_MIN_M) & (n_line >= SEAM_COVER * n_both) & (gap <= 2.0 * step)
     # Each side a carton's worth, not a rim's band (a carton's edge printed darker).
     ok &= (np.minimum(i + 0.5, nu - i - 0.5) * bin_m) >= SEAM_MIN_M
