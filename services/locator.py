@@ -310,6 +310,10 @@ class ColourCache:
 
     def put(self, stamp_ns: int, rgb: npt.NDArray[np.uint8]) -> None:
         with self._ready:
+            if self._pictures and stamp_ns < max(self._pictures):
+                # The camera's clock went back (a restarted sim or replay): the pictures kept
+                # are of another run, and their stamps would match this run's depth later.
+                self._pictures.clear()
             self._pictures[stamp_ns] = rgb
             while len(self._pictures) > self._keep:
                 del self._pictures[min(self._pictures)]

@@ -32,6 +32,7 @@ from schemas import (
     TransformStamped,
     codec,
 )
+from services.locator import ColourCache
 
 SEED_LINE = "box: middle (+0.064, +0.040) m, height 0.060 m, from 2,401 points on its top"
 BOX_LINE = (
@@ -153,6 +154,20 @@ def test_matcher_with_slop_pairs_the_nearest():
     found = matcher.add("depth", 200, "d")
     assert found is not None and found["info"].item == "near"
     assert matcher.add("depth", 300, "d2") is None
+
+
+def test_colour_of_a_run_before_the_clock_went_back_is_never_paired():
+    """A restarted camera starts its stamps again: the colour kept from the run before, whose
+    stamps this run reaches later, is dropped, not paired with this run's depth."""
+    cache = ColourCache(keep=4)
+    old, new = np.zeros((2, 2, 3), np.uint8), np.ones((2, 2, 3), np.uint8)
+    for stamp in (2_700, 2_800, 2_900, 3_000):
+        cache.put(stamp, old)
+    cache.put(100, new)
+    assert cache.take(100, slop_ns=10, wait_s=0) is new
+    assert cache.take(2_800, slop_ns=10, wait_s=0) is None
+    cache.put(2_800, new)
+    assert cache.take(2_800, slop_ns=10, wait_s=0) is new
 
 
 # --- the real process, synthetic captures --------------------------------------------------------
