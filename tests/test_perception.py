@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from onebox.geometry import Intrinsics
-from onebox.perception.boxes import BoxFinder, FinderSettings, _bands, find_boxes
+from onebox.perception.boxes import BoxFinder, FinderSettings, find_boxes
 from onebox.perception.support import Support, fit_support
+from onebox.perception.tops import _bands
 from onebox.testing.judged import yaw_error
 from onebox.testing.raycast import (
     Box,

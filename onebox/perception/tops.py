@@ -1,0 +1,1370 @@
+"""The tops of what stands on the support, measured: steps 2 to 5 of
+:mod:`onebox.perception.boxes`.
+
+:func:`plateaus` takes a depth picture, its lens, the colour picture (or None) and the support,
+and returns every flat top as a :class:`Plateau` (its level, tolerance, rectangle, score and
+whether it is a box's top), the height above the support of every pixel, and the picture of
+which top each pixel belongs to. What each box stands on is :mod:`onebox.perception.bases`.
+No I/O here.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from scipy import ndimage, spatial
+
+from onebox.geometry import Intrinsics
+from onebox.perception import segment
+from onebox.perception.rectangle import Rectangle, fit_rectangles
+from onebox.perception.support import SIGMA_FLOOR_M, Support
+
+Float32Array = npt.NDArray[np.float32]
+Float64Array = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
+
+TOP_TOLERANCE_FLOOR_M = 0.0015
+"""The least height tolerance of a top: a renderer's depth is good to a few tenths of a mm."""
+
+FLAT_REACH_M = 0.004
+"""How far from its level a reading still belongs to a top (at least the tolerance): a real
+carton's lid bulges or sags by several millimetres, smoothly (steps between neighbours still
+split objects), and the top is all of it; its level is still measured within the tolerance."""
+
+GROW_PX = 3
+"""How far a top grows back into cut pixels and fragments: a colour edge cuts ~2 pixels."""
+
+BAND_M = 0.005
+"""A piece between colour edges narrower than about twice this is a band (a seam's line),
+not a top: the tops beside it at its height grow across it and meet in its middle."""
+
+BAND_MAX_PX = 6
+"""The widest band, in pixels on either side of its middle line."""
+
+MIN_WIDTH_M = 0.01
+"""A top seen narrower than this is a sliver (the strip of a box showing past a taller one's
+foot, a line of flying pixels), not a box: its rectangle says nothing of a box's size."""
+
+NOISY_TOP_AREA_M2 = 0.0009
+"""Where depth is noisy (sigma 1 cm and more: a D435 past 1.5 m), a top must be 3 x 3 cm: a
+smaller one's plane is a noise clump's, and taken as a box's base it cut tall boxes short."""
+
+RISING_SHARE = 0.02
+"""A top narrower than its noise is read along the rays only if less than this share of its
+outline sees the surface rise past a band with no reading (a pallet's margin, cartons on it)."""
+
+
+@dataclass(frozen=True)
+class FinderSettings:
+    """Tolerances; those left None follow the noise measured on the support plane."""
+
+    min_height_m: float = 0.01
+    """Less than this above the surface is the surface."""
+    noise_sigma_m: float | None = None
+    """Depth noise; None estimates it from the support plane's residuals (growing as z^2)."""
+    table_z_m: float | None = None
+    """Skip the fit: the surface is the world plane z = table_z (needs a pose)."""
+    max_tilt_deg: float = 15.0
+    """A support plane may be this far from world up (with a pose)."""
+    workspace: tuple[tuple[float, float], tuple[float, float], tuple[float, float]] | None = None
+    """World (or optical-frame) x, y, z limits of a box's top middle; nothing reported outside."""
+    max_height_m: float | None = None
+    """A ceiling above the surface; anything higher is ignored."""
+    min_top_area_m2: float = 0.0004
+    """Tops smaller than this (2 x 2 cm) are dropped: speckles, clumps, flying pixels; where the
+    depth is noisy, smaller than (3 sigma)^2 too, up to ``NOISY_TOP_AREA_M2``."""
+    min_score: float = 0.85
+    """A top must fill this share of its rectangle (a disc fills 0.785)."""
+    max_top_tilt_deg: float = 8.0
+    """A box's top is parallel to the surface under it within this angle."""
+    max_curvature_growth: float = 1.3
+    """A top whose footprint grows more than this when the tolerance is loosened is curved."""
+    colour_step: float = 12.0
+    """A brightness step (0..255) between neighbours that separates two touching tops."""
+    keep_cut_off: bool = False
+    """Report tops cut off by the picture's border (their size is then a lower bound)."""
+    match_distance_m: float = 0.02
+    """BoxFinder: a box within this of last picture's box (and of a similar size) keeps its id."""
+    max_pixels: int | None = 640 * 480
+    """Larger pictures are read at every k-th pixel (k = 2 for 1280 x 720) to keep camera rate;
+    sizes are then good to that coarser footprint. None reads every pixel."""
+
+
+PAD = 12
+"""Empty pixels around the working crop, so looking twelve pixels past a top never wraps."""
+NEIGHBOURS = 4
+
+
+@dataclass
+class Plateau:
+    label: int
+    """Index among the picture's tops; ``labels_top`` holds label + 1."""
+    height_m: float
+    tolerance_m: float
+    pixels: int
+    footprint_m: float
+    visible_m2: float
+    rect: Rectangle | None = None
+    is_box: bool = False
+    score: float = 0.0
+    base_m: float = 0.0
+    on_plateau: int | None = None
+    stands_on: Plateau | None = None
+    """The top it stands on (None: the support, or a ledge of its own with no top)."""
+    platform: bool = False
+    """A level others stand on whose own extent is hidden (a pallet's top): never a box."""
+    on_platform: bool = False
+    """Stands on a platform (a pallet's top), where cartons stand packed side by side."""
+    ledge_m: float | None = None
+    """The highest flat level seen just past the top's outline (see :func:`_ledges`)."""
+    hidden_band_m: float = 0.0
+    """How far, along the support, what rises past the top's hidden outline stands off it
+    (median over the hidden outline): a wall rising at the top's edge stands at it, a taller
+    object in front of the top hides a band this wide of it."""
+
+
+@functools.lru_cache(maxsize=8)
+def height_slope(
+    width: int, height: int, lens: Intrinsics, normal: tuple[float, float, float]
+) -> Float32Array:
+    """Per pixel, normal . ray (ray = (across, down, 1)): height = depth * slope + offset."""
+    across, down = lens.rays(width, height)
+    slope = normal[0] * across[np.newaxis, :] + normal[1] * down[:, np.newaxis] + normal[2]
+    result: Float32Array = slope.astype(np.float32)
+    result.flags.writeable = False
+    return result
+
+
+def plane_basis(support: Support, camera_to_world: Float64Array | None) -> Float64Array:
+    """Rows e1, e2, n in the optical frame: e1 is the frame's x axis laid onto the plane."""
+    n = np.asarray(support.normal_camera, dtype=np.float64)
+    if camera_to_world is not None:
+        ref = camera_to_world[:3, :3].T @ np.array([1.0, 0.0, 0.0])
+        if abs(ref @ n) > 0.95:
+            ref = camera_to_world[:3, :3].T @ np.array([0.0, 1.0, 0.0])
+    else:
+        ref = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.95 else np.array([0.0, 1.0, 0.0])
+    e1 = ref - n * (ref @ n)
+    e1 /= np.linalg.norm(e1)
+    e2 = cross(n, e1)
+    return np.stack([e1, e2, n])
+
+
+def least_top_area(sigma_m: npt.ArrayLike, settings: FinderSettings) -> Float64Array:
+    """The smallest top kept where the noise is ``sigma_m``: ``min_top_area_m2`` where depth is
+    clean, (3 sigma)^2 where that is more, up to ``NOISY_TOP_AREA_M2``."""
+    low = settings.min_top_area_m2
+    noisy = (3.0 * np.asarray(sigma_m, dtype=np.float64)) ** 2
+    result: Float64Array = np.clip(noisy, low, max(low, NOISY_TOP_AREA_M2))
+    return result
+
+
+def _crop(standing: BoolArray) -> tuple[slice, slice] | None:
+    """The rows and columns holding standing pixels, one pixel wider for the steps."""
+    row_any = np.flatnonzero(standing.any(axis=1))
+    if len(row_any) == 0:
+        return None
+    col_any = np.flatnonzero(standing.any(axis=0))
+    rows_n, cols_n = standing.shape
+    r0, r1 = max(int(row_any[0]) - 1, 0), min(int(row_any[-1]) + 2, rows_n)
+    c0, c1 = max(int(col_any[0]) - 1, 0), min(int(col_any[-1]) + 2, cols_n)
+    return slice(r0, r1), slice(c0, c1)
+
+
+def plateaus(
+    depth: Float32Array,
+    lens: Intrinsics,
+    colour: npt.NDArray[np.uint8] | None,
+    settings: FinderSettings,
+    support: Support,
+) -> tuple[list[Plateau], Float32Array, npt.NDArray[np.int32]]:
+    """Every flat top, measured together: whole-array work on the crop, then one short
+    rectangle fit per top."""
+    rows_n, cols_n = depth.shape
+    slope = height_slope(cols_n, rows_n, lens, support.normal_camera)
+    height = depth * slope
+    height += np.float32(support.offset_camera_m)
+    with np.errstate(invalid="ignore"):
+        standing = (height > np.float32(settings.min_height_m)) & (depth > 0)
+    labels_top = np.zeros(depth.shape, dtype=np.int32)
+    crop = _crop(standing)
+    if crop is None:
+        return [], height, labels_top
+    r0, c0 = crop[0].start, crop[1].start
+    pad = ((PAD, PAD), (PAD, PAD))
+    h = np.pad(height[crop], pad, constant_values=np.nan)
+    d = np.pad(depth[crop], pad, constant_values=np.nan)
+    width_p = h.shape[1]
+    # Noise grows as distance squared from the support's figure at its distance; while it
+    # stays small everywhere the thresholds are single figures (no noise picture at all).
+    noise_k = np.float32(support.sigma_m / support.distance_m**2)
+    far = float(np.nanmax(d))
+    if 4.0 * max(float(noise_k) * far * far, SIGMA_FLOOR_M) <= min(
+        settings.min_height_m, segment.STEP_FLOOR_M
+    ):
+        stand = np.pad(standing[crop], pad)
+        step: Float32Array | np.float32 = np.float32(segment.STEP_FLOOR_M)
+    else:
+        with np.errstate(invalid="ignore"):
+            sigma4 = np.maximum(d * d * noise_k, np.float32(SIGMA_FLOOR_M)) * np.float32(4.0)
+            stand = h > np.maximum(sigma4, np.float32(settings.min_height_m))
+        step = np.maximum(sigma4, np.float32(segment.STEP_FLOOR_M))
+    if settings.max_height_m is not None:
+        with np.errstate(invalid="ignore"):
+            stand &= h < np.float32(settings.max_height_m)
+    cut = segment.breaks(h, step)
+    colour_cut: BoolArray | None = None
+    grey = None
+    if colour is not None:
+        grey = segment.grey(colour[crop])
+        colour_cut = np.pad(segment.colour_breaks(grey, settings.colour_step), pad)
+        cut |= colour_cut
+        grey = np.pad(grey, pad, mode="edge")
+    labels, count = ndimage.label(stand & ~cut)
+    if count == 0:
+        return [], height, labels_top
+    h_flat, d_flat, s_flat = h.reshape(-1), d.reshape(-1), np.pad(slope[crop], pad, "edge")
+    s_flat = s_flat.reshape(-1)
+    flat = labels.reshape(-1)
+    idx = np.flatnonzero(flat)
+    lab = flat[idx]
+    dd = d_flat[idx]
+    area_scale = np.float32(1.0 / (lens.fx * lens.fy))
+    areas = np.bincount(
+        lab, weights=dd * dd * area_scale / np.abs(s_flat[idx]), minlength=count + 1
+    )
+    areas[0] = 0.0
+    # Pieces too small to be a top (a carton's rim cut off by a colour edge, a clump, the cut
+    # pixels themselves) may be taken over by the top beside them at the same height.
+    least = 0.5 * float(least_top_area(support.sigma_m, settings))
+    big = np.flatnonzero(areas >= least)
+    if len(big) == 0:
+        return [], height, labels_top
+    big = big[np.argsort(-areas[big], kind="stable")]
+    tops_n = len(big)
+    lut = np.zeros(count + 1, dtype=np.int32)
+    lut[big] = np.arange(1, tops_n + 1, dtype=np.int32)
+    compact = lut[lab]
+    mine = compact > 0
+    p_idx, p_top = idx[mine], compact[mine] - 1
+    p_h, p_d = h_flat[p_idx], dd[mine]
+    counts = np.bincount(p_top, minlength=tops_n)
+    mean_d = np.bincount(p_top, weights=p_d, minlength=tops_n) / counts
+    tol = np.maximum(
+        3.0 * np.maximum(noise_k * mean_d * mean_d, SIGMA_FLOOR_M), TOP_TOLERANCE_FLOOR_M
+    )
+    level = _levels(p_h, p_top, tops_n, tol)
+    reach = np.maximum(tol, FLAT_REACH_M)
+    on_level = np.abs(p_h - level[p_top]) < reach[p_top]
+    top_lab = np.zeros(h.shape, dtype=np.int32)
+    top_flat = top_lab.reshape(-1)
+    small = np.zeros(count + 1, dtype=bool)
+    small[1:] = areas[1:] < least
+    candidates = np.concatenate([np.flatnonzero(stand.reshape(-1) & (flat == 0)), idx[small[lab]]])
+    band = np.zeros(tops_n, dtype=bool)
+    ring = np.zeros(tops_n, dtype=bool)
+    if colour_cut is not None:
+        pixels = np.bincount(lab, minlength=count + 1)
+        band, ring = _bands(
+            labels,
+            h,
+            d,
+            big,
+            pixels,
+            float(np.nanmin(d)) / lens.fx,
+            lens,
+            support,
+            (r0 - PAD, c0 - PAD),
+        )
+    in_band = band[p_top]
+    seated = on_level & ~in_band
+    top_flat[p_idx[seated]] = p_top[seated] + 1
+    # Cut pixels just under a top are its side faces' first pixels: in clean depth the top
+    # grows into none of them (its outline would widen by a pixel); under noise they cannot be
+    # told from a lid's rim dipping under the level, and the lid wins.
+    below = np.where(tol > TOP_TOLERANCE_FLOOR_M, reach, tol)
+    _grow(top_flat, candidates, h_flat, level, below, width_p, p_idx[in_band], reach)
+    if band.any():
+        # A band no top at its height reaches is an object of its own (a narrow box).
+        taken = np.bincount(p_top[in_band], weights=top_flat[p_idx[in_band]] > 0, minlength=tops_n)
+        alone = band & (taken == 0)
+        back = alone[p_top] & on_level
+        top_flat[p_idx[back]] = p_top[back] + 1
+        if (alone & ~ring).any():
+            # ... and one that runs round no other top grows back into its own cut pixels
+            # (those of a narrow top seen at a slant, a few pixels high between the colour
+            # edges of its rims; a ring of seams round cartons would fill in); no other top
+            # grows again.
+            own_level = np.where(alone & ~ring, level, np.nan)
+            rest = candidates[top_flat[candidates] == 0]
+            _grow(top_flat, rest, h_flat, own_level, below, width_p, None, reach)
+    # Measured, then looked over for seams between cartons of one shade (colour only), split
+    # and measured again.
+    for look in range(SEAM_ROUNDS + 1):
+        tops = _Tops.gather(top_lab, tops_n, PAD, (r0, c0))
+        plateaus = _measure_all(
+            tops,
+            top_flat,
+            h_flat,
+            d_flat,
+            s_flat,
+            level,
+            tol,
+            p_idx,
+            p_top,
+            p_h,
+            lens,
+            support,
+            settings,
+            depth.shape,
+        )
+        if look == SEAM_ROUNDS or colour_cut is None or grey is None:
+            break
+        cells = _seams(
+            plateaus,
+            tops,
+            s_flat,
+            colour_cut.reshape(-1),
+            grey.reshape(-1),
+            settings.colour_step,
+            lens,
+            support,
+            depth.shape,
+        )
+        if not cells:
+            break
+        level, tol, tops_n = _split_tops(top_flat, tops, cells, level, tol, h_flat, p_idx, p_top)
+    labels_top[crop] = top_lab[PAD:-PAD, PAD:-PAD]
+    return plateaus, height, labels_top
+
+
+@dataclass(frozen=True)
+class _Windows:
+    """Per group a histogram of heights, in bins of a third of the least tolerance, summed over
+    a window of +-tol (the group's) around each bin."""
+
+    counts: Float64Array
+    """(groups, bins): readings within each bin's window."""
+    at: npt.NDArray[np.intp]
+    """Each reading's bin."""
+    reach: npt.NDArray[np.intp]
+    """(groups, 1): a window's half-width in bins."""
+    bin_m: float
+
+
+def _windows(
+    values: npt.NDArray[np.floating],
+    group: npt.NDArray[np.int32],
+    count: int,
+    tol: Float64Array,
+    low: float,
+) -> _Windows:
+    bin_m = max(float(tol.min()) / 3.0, 1e-4)
+    bins = int((float(values.max()) - low) / bin_m) + 2
+    if bins * count > 4_000_000:
+        bin_m *= bins * count / 4_000_000
+        bins = int((float(values.max()) - low) / bin_m) + 2
+    at = ((values - low) / bin_m).astype(np.intp)
+    hist = np.bincount(group * bins + at, minlength=count * bins).reshape(count, bins)
+    cumulative = np.zeros((count, bins + 1))
+    np.cumsum(hist, axis=1, out=cumulative[:, 1:])
+    reach = np.ceil(tol / bin_m).astype(np.intp)[:, np.newaxis]
+    columns = np.arange(bins)[np.newaxis, :]
+    counts = np.take_along_axis(cumulative, np.minimum(columns + reach + 1, bins), 1)
+    counts -= np.take_along_axis(cumulative, np.maximum(columns - reach, 0), 1)
+    return _Windows(counts, at, reach, bin_m)
+
+
+def _levels(
+    values: Float32Array, which: npt.NDArray[np.int32], count: int, tol: Float64Array
+) -> Float64Array:
+    """Per piece, its top's height: the most common height (the most readings within the
+    tolerance), then the mean of the readings within the tolerance of it, twice."""
+    w = _windows(values, which, count, tol, float(values.min()))
+    # The mean of the readings in the fullest window, then within the tolerance of it.
+    peak = w.counts.argmax(axis=1)
+    near = np.abs(w.at - peak[which]) <= w.reach[which, 0]
+    total = np.bincount(which[near], weights=values[near], minlength=count)
+    level = total / np.maximum(np.bincount(which[near], minlength=count), 1)
+    for _ in range(2):
+        near = np.abs(values - level[which]) < tol[which]
+        total = np.bincount(which[near], weights=values[near], minlength=count)
+        number = np.bincount(which[near], minlength=count)
+        level = np.where(number > 0, total / np.maximum(number, 1), level)
+    result: Float64Array = level
+    return result
+
+
+def _bands(
+    labels: npt.NDArray[np.int32],
+    h: Float32Array,
+    d: Float32Array,
+    big: npt.NDArray[np.intp],
+    counts: npt.NDArray[np.intp],
+    footprint_m: float,
+    lens: Intrinsics,
+    support: Support,
+    origin: tuple[int, int],
+) -> tuple[BoolArray, BoolArray]:
+    """Which tops (pieces ``big``, in order) are only bands, and which of those bands run
+    round another top (their bounding box holds some of it): a seam's dark line between two
+    cartons, cut out along both sides by colour edges. Nothing of a band is left once it
+    shrinks by a few pixels (BAND_M at ``footprint_m``; fewer along the line of sight where a
+    camera sees the piece at a slant: its pixels are longer that way), and it runs along a
+    carton's side, many times longer than it is wide (a short thin piece is a strip of
+    something else, such as a box mostly hidden under another). A pixel with no reading is
+    no edge: dropout does not thin a top; nor is a lone pixel cut out of the piece by noise
+    (three of its four neighbours are the piece). ``origin``: the picture's row and column of
+    ``labels``' first."""
+    k = min(max(math.ceil(BAND_M / max(footprint_m, 1e-6)), 2), BAND_MAX_PX)
+    band = np.zeros(len(big), dtype=bool)
+    ring = np.zeros(len(big), dtype=bool)
+    is_big = np.zeros(len(counts), dtype=bool)
+    is_big[big] = True
+    slices = ndimage.find_objects(labels)
+    rows_n, cols_n = labels.shape
+    normal = np.asarray(support.normal_camera, dtype=np.float64)
+    for t, piece in enumerate(big):
+        where = slices[piece - 1]
+        if where is None:
+            continue
+        tall, wide = where[0].stop - where[0].start, where[1].stop - where[1].start
+        # Neither count is under 2 or over k: most pieces are plainly no band whatever they are.
+        if max(tall, wide) < 16 or counts[piece] > 3 * k * (tall + wide):
+            continue
+        k_rows, k_cols = _band_pixels(
+            (where[0].start + where[0].stop - 1) / 2 + origin[0],
+            (where[1].start + where[1].stop - 1) / 2 + origin[1],
+            d[where][labels[where] == piece],
+            normal,
+            lens,
+            k,
+        )
+        # A band holds at most 2k pixels across its length; seams round and between cartons
+        # join in rings and grids, up to about twice round their bounding box.
+        if max(tall / k_rows, wide / k_cols) < 8 or counts[piece] > 3 * (
+            k_cols * tall + k_rows * wide
+        ):
+            continue
+        rs = slice(max(where[0].start - 1, 0), min(where[0].stop + 1, rows_n))
+        cs = slice(max(where[1].start - 1, 0), min(where[1].stop + 1, cols_n))
+        mine = labels[rs, cs] == piece
+        around = np.zeros(mine.shape, dtype=np.int8)
+        around[1:] += mine[:-1]
+        around[:-1] += mine[1:]
+        around[:, 1:] += mine[:, :-1]
+        around[:, :-1] += mine[:, 1:]
+        alive = mine | np.isnan(h[rs, cs]) | (around >= 3)
+        for step in range(max(k_rows, k_cols)):
+            core = alive.copy()
+            if step < k_cols:
+                core[:, :-1] &= alive[:, 1:]
+                core[:, 1:] &= alive[:, :-1]
+            if step < k_rows:
+                core[:-1] &= alive[1:]
+                core[1:] &= alive[:-1]
+            core[[0, -1], :] = False
+            core[:, [0, -1]] = False
+            alive = core
+        band[t] = not (alive & mine).any()
+        inside = labels[where]
+        ring[t] = band[t] and bool((is_big[inside] & (inside != piece)).any())
+    return band, ring
+
+
+def _band_pixels(
+    row: float,
+    col: float,
+    depths: Float32Array,
+    normal: Float64Array,
+    lens: Intrinsics,
+    pixels: int,
+) -> tuple[int, int]:
+    """How many pixels down and across a band's shrinking takes: ``pixels`` along the
+    picture's shorter step on a plane parallel to the support at the pixel (row, col) and the
+    median of ``depths``, fewer along the longer (a top seen at a slant: its rows are longer
+    along the line of sight than its columns across it), at least 2."""
+    depth = float(np.nanmedian(depths)) if len(depths) else math.nan
+    if not math.isfinite(depth) or depth <= 0:
+        return pixels, pixels
+
+    def ray(r: float, c: float) -> Float64Array:
+        return np.array([(c - lens.cx) / lens.fx, (r - lens.cy) / lens.fy, 1.0])
+
+    here = ray(row, col) * depth
+    level = float(normal @ here)
+    metres = []
+    for r, c in ((row + 1.0, col), (row, col + 1.0)):
+        other = ray(r, c)
+        along = float(normal @ other)
+        metres.append(float(np.linalg.norm(other * (level / along) - here)) if along else 0.0)
+    shortest = min(metres)
+    if not shortest > 0:
+        return pixels, pixels
+    down, across = (max(math.ceil(pixels * shortest / m), 2) for m in metres)
+    return down, across
+
+
+def _grow(
+    top_flat: npt.NDArray[np.int32],
+    candidates: npt.NDArray[np.intp],
+    h_flat: Float32Array,
+    level: Float64Array,
+    tol: Float64Array,
+    width: int,
+    bands: npt.NDArray[np.intp] | None = None,
+    above: Float64Array | None = None,
+) -> None:
+    """Tops grow back into cut pixels and small pieces at their height (from ``tol`` under
+    their level to ``above`` over it, ``tol`` when None), GROW_PX pixels, and on across
+    ``bands`` (a seam's line between colour edges) until they meet; where two tops reach one
+    pixel the larger (lower index) takes it, so a band splits down its middle."""
+    reach = GROW_PX
+    if bands is not None and len(bands):
+        candidates = np.concatenate([candidates, bands])
+        reach = 4 * BAND_MAX_PX
+    heights = h_flat[candidates]
+    free = np.zeros(len(candidates), dtype=bool)
+    free[len(candidates) - (0 if bands is None else len(bands)) :] = True
+    none = np.int32(np.iinfo(np.int32).max)
+    for step in range(reach):
+        if step == GROW_PX:
+            candidates, heights, free = candidates[free], heights[free], free[free]
+        if len(candidates) == 0:
+            return
+        best = np.full(len(candidates), none, dtype=np.int32)
+        for offset in (1, -1, width, -width):
+            seen = top_flat[candidates + offset]
+            np.minimum(best, np.where(seen > 0, seen, none), out=best)
+        take = np.flatnonzero(best < none)
+        which = best[take] - 1
+        rise = heights[take] - level[which]
+        fits = (rise > -tol[which]) & (rise < (tol if above is None else above)[which])
+        take, which = take[fits], which[fits]
+        top_flat[candidates[take]] = which + 1
+        if len(take) == 0:
+            return
+        keep = np.ones(len(candidates), dtype=bool)
+        keep[take] = False
+        candidates, heights, free = candidates[keep], heights[keep], free[keep]
+
+
+@dataclass
+class _Tops:
+    """Every top's pixels in the padded crop, grouped by top (row-major within a top)."""
+
+    flat: npt.NDArray[np.intp]
+    top: npt.NDArray[np.int32]
+    starts: npt.NDArray[np.intp]
+    counts: npt.NDArray[np.intp]
+    width: int
+    rows: npt.NDArray[np.intp]
+    cols: npt.NDArray[np.intp]
+    row_fill: Float64Array
+    col_fill: Float64Array
+    shift: tuple[int, int]
+    """Picture row and column of the padded crop's first pixel."""
+
+    @classmethod
+    def gather(
+        cls, top_lab: npt.NDArray[np.int32], count: int, pad: int, origin: tuple[int, int]
+    ) -> _Tops:
+        width = top_lab.shape[1]
+        flat, top = _grouped(top_lab.reshape(-1), count)
+        counts = np.bincount(top, minlength=count)
+        starts = np.concatenate(([0], np.cumsum(counts)[:-1]))
+        rows, cols = np.divmod(flat, width)
+        row_fill = _spans(top, rows, cols, count, top_lab.shape[0])
+        col_fill = _spans(top, cols, rows, count, width)
+        shift = (origin[0] - pad, origin[1] - pad)
+        return cls(
+            flat,
+            top,
+            starts,
+            counts,
+            width,
+            rows + shift[0],
+            cols + shift[1],
+            row_fill,
+            col_fill,
+            shift,
+        )
+
+
+def _grouped(
+    labels: npt.NDArray[np.int32], count: int
+) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.int32]]:
+    """Flat indices of labelled pixels, grouped by label, in picture order within a group."""
+    flat = np.flatnonzero(labels)
+    top = labels[flat] - 1
+    kind = np.int16 if count < 32_000 else np.int32
+    order = np.argsort(top.astype(kind), kind="stable")
+    return flat[order], top[order]
+
+
+def _spans(
+    top: npt.NDArray[np.int32],
+    lines: npt.NDArray[np.intp],
+    along: npt.NDArray[np.intp],
+    count: int,
+    lines_n: int,
+) -> Float64Array:
+    """Per top, the pixels from the first to the last of each line (row or column, of
+    ``lines_n``), summed: the top's area with the holes in it (noise, a box standing on it)
+    filled. One pass over the pixels, whatever their order."""
+    key = top.astype(np.intp) * lines_n + lines
+    first = np.full(count * lines_n, np.iinfo(np.intp).max, dtype=np.intp)
+    last = np.full(count * lines_n, -1, dtype=np.intp)
+    np.minimum.at(first, key, along)
+    np.maximum.at(last, key, along)
+    spans = np.maximum(last - first + 1, 0).reshape(count, lines_n)
+    result: Float64Array = spans.sum(axis=1).astype(np.float64)
+    return result
+
+
+def _tilts(
+    top: npt.NDArray[np.int32],
+    n: Float64Array,
+    cols: npt.NDArray[np.intp],
+    rows: npt.NDArray[np.intp],
+    d: Float64Array,
+    across: Float64Array,
+    down: Float64Array,
+    normal: Float64Array,
+    count: int,
+) -> Float64Array:
+    """Each top's tilt from the support, degrees, from its plane fitted along the rays.
+
+    A plane n·p = c seen along the rays (x, y, 1) has 1 / depth = n·(x, y, 1) / c: linear in
+    the ray, which has no error, so least squares on 1 / depth leaves the error where it is,
+    in the depth. The least axis of the points' moments puts it everywhere: once the noise is
+    wider than a narrow top (sigma above its width / sqrt 12: a box 12 pixels wide 2 m from a
+    stereo camera), that axis turns across the top, and a slanted ray tips it further.
+    """
+    x, y, w = across[cols], down[rows], 1.0 / d
+    centred = []
+    for values in (x, y, w):
+        mean = np.bincount(top, weights=values, minlength=count) / n
+        centred.append((values - mean[top], mean))
+    cov = np.empty((count, 2, 3))
+    for i in range(2):
+        for j in range(3):
+            cov[:, i, j] = (
+                np.bincount(top, weights=centred[i][0] * centred[j][0], minlength=count) / n
+            )
+    spread = cov[:, :, :2] + np.eye(2) * 1e-18
+    alpha, beta = np.linalg.solve(spread, cov[:, :, 2:3])[:, :, 0].T
+    gamma = centred[2][1] - alpha * centred[0][1] - beta * centred[1][1]
+    plane = np.stack([alpha, beta, gamma], axis=1)
+    cos = np.abs(plane @ normal) / np.maximum(np.linalg.norm(plane, axis=1), 1e-300)
+    result: Float64Array = np.degrees(np.arccos(np.minimum(cos, 1.0)))
+    return result
+
+
+def _level(
+    tilt: float, ray_tilt: float, rising: float, rect: Rectangle, settings: FinderSettings
+) -> bool:
+    """Whether a top lies parallel to the support: by its moments' least axis, or, for a top
+    narrower than its depth noise (whose least axis turns across it), by its plane fitted
+    along the rays when at least three of its sides are seen falling away (edges, or the
+    dropout a stereo camera leaves at them): a box standing free, not the strip of a lower top
+    seen past a box on it, nor a pallet's margin, which a rising face bounds."""
+    limit = settings.max_top_tilt_deg
+    if tilt <= limit:
+        return True
+    falling = set(rect.edge_normals) | set(rect.dropout_normals)
+    return ray_tilt <= limit and len(falling) >= 3 and rising < RISING_SHARE
+
+
+def _measure_all(
+    tops: _Tops,
+    top_flat: npt.NDArray[np.int32],
+    h_flat: Float32Array,
+    d_flat: Float32Array,
+    s_flat: Float32Array,
+    level: Float64Array,
+    tol: Float64Array,
+    p_idx: npt.NDArray[np.intp],
+    p_top: npt.NDArray[np.int32],
+    p_h: Float32Array,
+    lens: Intrinsics,
+    support: Support,
+    settings: FinderSettings,
+    shape: tuple[int, int],
+) -> list[Plateau]:
+    """Every top's plane, outline, rectangle and score; which of them are boxes."""
+    rows_n, cols_n = shape
+    count = len(level)
+    top = tops.top
+    across, down = lens.rays(cols_n, rows_n)
+    basis = plane_basis(support, None)
+    d = d_flat[tops.flat]
+    pixel_area = d * d
+    pixel_area /= np.abs(s_flat[tops.flat])
+    pixel_area *= np.float32(1.0 / (lens.fx * lens.fy))
+    n = np.maximum(tops.counts, 1).astype(np.float64)
+    area = np.bincount(top, weights=pixel_area, minlength=count)
+    mean_area = area / n
+    # The top's plane from its moments, all tops at once, on a sample of at most ~6k pixels
+    # (every k-th of the grouped pixels: each top keeps its share).
+    k = max(1, len(top) // 6_000)
+    sample = slice(k // 2, None, k)
+    ds = d[sample].astype(np.float64)
+    xyz = (across[tops.cols[sample]] * ds, down[tops.rows[sample]] * ds, ds)
+    st = top[sample]
+    ns = np.maximum(np.bincount(st, minlength=count), 1).astype(np.float64)
+    centred = []
+    for row in basis:
+        values = row[0] * xyz[0] + row[1] * xyz[1] + row[2] * xyz[2]
+        mean = np.bincount(st, weights=values, minlength=count) / ns
+        centred.append(values - mean[st])
+    moments = np.empty((count, 3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            m = np.bincount(st, weights=centred[i] * centred[j], minlength=count) / ns
+            moments[:, i, j] = m
+            moments[:, j, i] = m
+    values_e, vectors = np.linalg.eigh(moments)
+    rms = np.sqrt(np.maximum(values_e[:, 0], 0.0))
+    tilt = np.degrees(np.arccos(np.minimum(np.abs(vectors[:, 2, 0]), 1.0)))
+    # Along the rays only where the least axis finds a top tilted (noise may have turned it).
+    ray_tilt = np.full(count, np.inf)
+    steep = (tilt > settings.max_top_tilt_deg)[st]
+    if steep.any():
+        ray_tilt = _tilts(
+            st[steep],
+            ns,
+            tops.cols[sample][steep],
+            tops.rows[sample][steep],
+            ds[steep],
+            across,
+            down,
+            basis[2],
+            count,
+        )
+    # Outline: top pixels with a 4-neighbour off the top. Hidden: within two pixels past it the
+    # surface rises above the top (something stands on it, or is in front of it).
+    label_at = top_flat
+    own = top + 1
+    outline = np.zeros(len(top), dtype=bool)
+    offsets = (1, -1, tops.width, -tops.width)
+    for offset in offsets:
+        outline |= label_at[tops.flat + offset] != own
+    edge = np.flatnonzero(outline)
+    e_flat, e_top = tops.flat[edge], top[edge]
+    # The outline's points in the support plane (the rectangle needs no others).
+    de = d[edge].astype(np.float64)
+    xe, ye = across[tops.cols[edge]] * de, down[tops.rows[edge]] * de
+    a = basis[0, 0] * xe + basis[0, 1] * ye + basis[0, 2] * de
+    b = basis[1, 0] * xe + basis[1, 1] * ye + basis[1, 2] * de
+    fill_a, fill_b = _nearer_on_level(
+        a, b, h_flat[e_flat], level[e_top], e_top, support.offset_camera_m, count
+    )
+    # Each row's first and last outline pixel: their hull is the top's hull.
+    row_key = e_top.astype(np.int64) * (rows_n + 1) + tops.rows[edge]
+    change = np.flatnonzero(row_key[1:] != row_key[:-1])
+    extreme = np.zeros(len(edge), dtype=bool)
+    extreme[0] = extreme[-1] = True
+    extreme[change] = True
+    extreme[change + 1] = True
+    # Above this a surface rises over a top (something stands on or in front of it).
+    over = level + np.maximum(1.5 * tol, 0.005)
+    e_level = over[e_top]
+    hidden = np.zeros(len(edge), dtype=bool)
+    unsure = np.zeros(len(edge), dtype=bool)
+    # Drop: past the pixel the surface is seen well below the top: a real edge, not a shadow.
+    drop = np.zeros(len(edge), dtype=bool)
+    e_low = level[e_top] - np.maximum(1.5 * tol[e_top], 0.005)
+    # For hidden outline points, how far along the support the nearest rising point past it
+    # lies from it.
+    stand_off = np.full(len(edge), np.inf)
+    risen_far = np.zeros(len(edge), dtype=bool)
+    for offset in offsets:
+        off = label_at[e_flat + offset] != e_top + 1
+        beyond = h_flat[e_flat + offset]
+        rise = np.fmax(np.fmax(beyond, h_flat[e_flat + 2 * offset]), h_flat[e_flat + 3 * offset])
+        with np.errstate(invalid="ignore"):
+            risen = off & (rise > e_level)
+        hidden |= risen
+        at = np.flatnonzero(risen)
+        for k in (1, 2, 3):
+            f = e_flat[at] + k * offset
+            with np.errstate(invalid="ignore"):
+                up = h_flat[f] > e_level[at]
+            f, on = f[up], at[up]
+            r, c = np.divmod(f, tops.width)
+            df = d_flat[f].astype(np.float64)
+            xf = across[c + tops.shift[1]] * df
+            yf = down[r + tops.shift[0]] * df
+            pa = basis[0, 0] * xf + basis[0, 1] * yf + basis[0, 2] * df
+            pb = basis[1, 0] * xf + basis[1, 1] * yf + basis[1, 2] * df
+            stand_off[on] = np.fmin(stand_off[on], np.hypot(pa - a[on], pb - b[on]))
+        unsure |= off & np.isnan(beyond)
+        # Past a band with no reading (a stereo camera's at a depth edge, as wide as a steep
+        # face seen past it and the band each side of that), the first reading says whether
+        # the surface rises there.
+        gap = np.flatnonzero(off & np.isnan(rise))
+        far, undecided = e_flat[gap], np.ones(len(gap), dtype=bool)
+        for k in range(4, PAD + 1):
+            beyond_k = h_flat[far + k * offset]
+            with np.errstate(invalid="ignore"):
+                up = undecided & (beyond_k > e_level[gap])
+                undecided &= np.isnan(beyond_k)
+            risen_far[gap[up]] = True
+        with np.errstate(invalid="ignore"):
+            drop |= off & (np.fmin(beyond, h_flat[e_flat + 2 * offset]) < e_low)
+    # Past a dropout band something rises: hidden as much as by a rise right past the top.
+    rise_near = hidden.copy()
+    hidden |= risen_far
+    border = (tops.rows == 0) | (tops.rows == rows_n - 1) | (tops.cols == 0)
+    border |= tops.cols == cols_n - 1
+    cut_off = np.bincount(top[border], minlength=count) > 0
+    filled = np.minimum(tops.row_fill, tops.col_fill)
+    whole_area = area + np.maximum(filled - tops.counts, 0) * mean_area
+    mean_depth = np.bincount(top, weights=d, minlength=count) / n
+    sigma = np.asarray(support.sigma_at(mean_depth), dtype=np.float64)
+    eligible = (tops.counts >= 6) & (whole_area >= least_top_area(sigma, settings))
+    if not settings.keep_cut_off:
+        eligible &= ~cut_off
+    footprint = np.sqrt(mean_area)
+    chosen = eligible[e_top]
+    rects = fit_rectangles(
+        np.stack([a[chosen], b[chosen]], axis=1),
+        e_top[chosen],
+        hidden[chosen],
+        extreme[chosen],
+        unsure[chosen],
+        drop[chosen],
+        footprint,
+        whole_area,
+    )
+    # A rim of a lower top a few pixels wide is told from noise only while the noise is well
+    # under a footprint (3 sigma within two): a close camera, a clean picture.
+    # Only for the tops that may be boxes, and while the noise lets a rim be told.
+    rim = eligible & (3.0 * sigma <= 2.0 * footprint)
+    at_rim = rim[e_top]
+    ledge = _ledges(
+        e_flat[at_rim],
+        e_top[at_rim],
+        label_at,
+        h_flat,
+        tops.width,
+        level,
+        tol,
+        footprint,
+        settings,
+        count,
+    )
+    edge_starts = np.searchsorted(e_top, np.arange(count))
+    edge_stops = np.searchsorted(e_top, np.arange(count), side="right")
+    reach = np.maximum(tol, FLAT_REACH_M)
+    loose = _loose_groups(p_idx, p_top, p_h, level, reach, count)
+    plateaus: list[Plateau] = []
+    for t in range(count):
+        if tops.counts[t] < 6:
+            continue
+        p = Plateau(
+            t,
+            float(level[t]),
+            float(tol[t]),
+            int(tops.counts[t]),
+            float(footprint[t]),
+            float(area[t]),
+        )
+        p.ledge_m = None if np.isnan(ledge[t]) else float(ledge[t])
+        part = slice(int(edge_starts[t]), int(edge_stops[t]))
+        bands = stand_off[part][hidden[part]]
+        bands = bands[np.isfinite(bands)]
+        p.hidden_band_m = float(np.median(bands)) if len(bands) else 0.0
+        plateaus.append(p)
+        rect = rects[t]
+        if not eligible[t] or rect is None:
+            continue
+        p.rect = rect
+        # The fill is taken against the extreme pixels (plus a footprint), not the fitted
+        # sides: a disc's sides fitted by medians would hug it.
+        ax = np.asarray(rect.axis)
+        perp = np.array([-ax[1], ax[0]])
+        part = slice(int(edge_starts[t]), int(edge_stops[t]))
+        points = np.stack([fill_a[part], fill_b[part]], axis=1)
+        rect_area = (np.ptp(points @ ax) + footprint[t]) * (np.ptp(points @ perp) + footprint[t])
+        fill = min(float(whole_area[t]) / rect_area, 1.0)
+        # A side hidden by what rises past a dropout band is ragged like a seen one.
+        through_dropout = rect.hidden_sides == 1 and risen_far[part].sum() > rise_near[part].sum()
+        if (
+            tol[t] > RAGGED_TOLERANCE_M
+            and fill >= RAGGED_MIN_FILL
+            and (rect.hidden_sides == 0 or through_dropout)
+            and len(points) >= 3
+        ):
+            # Noise this large makes a top's outline ragged (readings near its edge fall in and
+            # out of the tolerance): its hull, grown by half a footprint, measures the shape of
+            # a top seen whole that already nearly fills its rectangle (a narrow strip, such as
+            # a pallet's margin under the cartons, loses more of its area to the ragged edge
+            # and stays what it is).
+            fill = max(fill, min(_hull_area(points, float(footprint[t])) / rect_area, 1.0))
+        flatness = max(0.0, 1.0 - max(rms[t] - 0.5 * reach[t], 0.0) / reach[t])
+        if fill * flatness < settings.min_score and hidden[part].any():
+            # Something in front hides part of the top (a taller box nearer the camera): the
+            # fill is taken over the part of the rectangle that can be seen, when the outline
+            # seen hugs the rectangle's sides (a disc's does not, whatever hides its corners).
+            seen = _seen_fill(
+                t,
+                points,
+                extreme[part] & ~hidden[part] & ~unsure[part],
+                (hidden[part] & ~(stand_off[part] <= 3.0 * footprint[t])) | unsure[part],
+                rect,
+                float(footprint[t]),
+                float(whole_area[t]),
+                float(level[t]),
+                float(over[t]),
+                top_flat,
+                h_flat,
+                tops,
+                across,
+                down,
+                basis,
+                lens,
+                support,
+            )
+            fill = max(fill, seen)
+        p.score = fill * flatness
+        rising = float(risen_far[part].mean()) if part.stop > part.start else 0.0
+        if p.score < settings.min_score or not _level(tilt[t], ray_tilt[t], rising, rect, settings):
+            continue
+        # Curved tops widen when the tolerance is loosened; a box's sides drop straight down.
+        wide = loose[t]
+        if len(wide) > tops.counts[t] and _growth(wide, tops, d_flat, lens, basis, points, ax) > (
+            settings.max_curvature_growth
+        ):
+            continue
+        p.is_box = True
+    return plateaus
+
+
+def _nearer_on_level(
+    a: Float64Array,
+    b: Float64Array,
+    height: Float32Array,
+    level: Float64Array,
+    top: npt.NDArray[np.int32],
+    offset_m: float,
+    count: int,
+) -> tuple[Float64Array, Float64Array]:
+    """Outline points ``a``, ``b`` (the readings in the support plane's coordinates) for the
+    fill: each one where its ray meets its top's level, or where its reading puts it, whichever
+    is nearer the top's middle.
+
+    A reading's error along its ray moves it across the top too, by the error times the ray's
+    slant (12 mm for sigma 21 mm seen 30 degrees off straight down: a D435 at 2.5 m), so the
+    outline's extreme readings stand past the top's edge and a box seen through such noise
+    fills too little of the span they give. Placed on its level, a pixel of the top is where
+    it is; a pixel of a side face within the tolerance would be placed out past the edge, and
+    its reading, at the edge, is the nearer. The rectangle itself is fitted to the readings,
+    whose errors its medians average out."""
+    # Along the ray the height is linear in depth (height = depth * slope + offset): the depth
+    # at which the ray meets the level scales the reading's coordinates.
+    scale = (level - offset_m) / (height.astype(np.float64) - offset_m)
+    on_a, on_b = a * scale, b * scale
+    n = np.maximum(np.bincount(top, minlength=count), 1)
+    mid_a = (np.bincount(top, weights=on_a, minlength=count) / n)[top]
+    mid_b = (np.bincount(top, weights=on_b, minlength=count) / n)[top]
+    nearer = np.hypot(on_a - mid_a, on_b - mid_b) < np.hypot(a - mid_a, b - mid_b)
+    return np.where(nearer, on_a, a), np.where(nearer, on_b, b)
+
+
+SEAM_ROUNDS = 2
+"""Tops are looked over for seams at most this many times (every seam across a top is split at
+once; a seam that only runs across one of the parts shows after)."""
+SEAM_BIN = 1.5
+"""A seam's bins, footprints: a tilted camera's pixels lie farther apart one way."""
+
+
+def _split_tops(
+    top_flat: npt.NDArray[np.int32],
+    tops: _Tops,
+    cells: list[tuple[int, npt.NDArray[np.intp]]],
+    level: Float64Array,
+    tol: Float64Array,
+    h_flat: Float32Array,
+    p_idx: npt.NDArray[np.intp],
+    p_top: npt.NDArray[np.int32],
+) -> tuple[Float64Array, Float64Array, int]:
+    """Cartons of one shade whose seams' colour lines break for a pixel or two grew into one
+    top: each cell between the seams (from :func:`_seams`: per top, each of its pixels' cell)
+    becomes a top of its own, and so does each connected part of a cell (a load's cartons round
+    a missing one); the largest part keeps the top's label. ``top_flat`` and ``p_top`` are
+    relabelled in place; returns the levels and tolerances, one per top, and the number of
+    tops."""
+    before = len(level)
+    count = before
+    parents = []
+    for t, cell in cells:
+        flat = tops.flat[int(tops.starts[t]) : int(tops.starts[t] + tops.counts[t])]
+        pieces = [
+            piece for c in np.unique(cell) for piece in _connected(flat[cell == c], tops.width)
+        ]
+        biggest = max(range(len(pieces)), key=lambda k: len(pieces[k]))
+        for k, piece in enumerate(pieces):
+            if k == biggest or len(piece) < 6:
+                continue
+            top_flat[piece] = count + 1
+            parents.append(t)
+            count += 1
+    moved = top_flat[p_idx] > before
+    p_top[moved] = top_flat[p_idx[moved]] - 1
+    level = np.concatenate([level, level[parents]])
+    tol = np.concatenate([tol, tol[parents]])
+    # Each part at its own height: under a stereo camera's noise a step of a centimetre or two
+    # between two cartons may be what the depth could not see.
+    split = np.unique(np.concatenate([[t for t, _ in cells], np.arange(before, count)]))
+    on = np.flatnonzero(np.isin(top_flat, (split + 1).astype(np.int32)))
+    own = _levels(h_flat[on], top_flat[on] - 1, count, tol)
+    level[split] = own[split]
+    return level, tol, count
+
+
+def _connected(flat: npt.NDArray[np.intp], width: int) -> list[npt.NDArray[np.intp]]:
+    """The 4-connected parts of a set of pixels (flat indices in a picture ``width`` wide)."""
+    if len(flat) == 0:
+        return []
+    r, c = np.divmod(flat, width)
+    r0, c0 = int(r.min()), int(c.min())
+    mask = np.zeros((int(r.max()) - r0 + 1, int(c.max()) - c0 + 1), dtype=bool)
+    mask[r - r0, c - c0] = True
+    labels, n = ndimage.label(mask)
+    if n <= 1:
+        return [flat]
+    which = labels[r - r0, c - c0]
+    return [flat[which == k] for k in range(1, n + 1)]
+
+
+def _seams(
+    plateaus: list[Plateau],
+    tops: _Tops,
+    s_flat: Float32Array,
+    cut_flat: BoolArray,
+    grey_flat: npt.NDArray[np.int16],
+    colour_step: float,
+    lens: Intrinsics,
+    support: Support,
+    shape: tuple[int, int],
+) -> list[tuple[int, npt.NDArray[np.intp]]]:
+    """Tops that straight lines of colour edges or dark valleys cross from side to side,
+    parallel to a side of their rectangle, with the top going on past them on both sides (the
+    seams between cartons of one shade, along and across): per such top, its label and each of
+    its pixels' cell between the lines (0, 1, ...)."""
+    rows_n, cols_n = shape
+    across, down = lens.rays(cols_n, rows_n)
+    basis = plane_basis(support, None)
+    found: list[tuple[int, npt.NDArray[np.intp]]] = []
+    for p in plateaus:
+        if p.rect is None or p.rect.length_m < 2.0 * segment.SEAM_MIN_M:
+            continue
+        t = p.label
+        part = slice(int(tops.starts[t]), int(tops.starts[t] + tops.counts[t]))
+        flat = tops.flat[part]
+        shade = grey_flat[flat]
+        cut = cut_flat[flat] | segment.valleys(grey_flat, flat, tops.width, colour_step)
+        if np.count_nonzero(cut) * p.footprint_m < segment.SEAM_MIN_M:
+            continue
+        # Each pixel's ray met with the top's plane, not its reading: a stereo camera's noise
+        # along the ray would smear the line over several footprints.
+        d = (p.height_m - support.offset_camera_m) / s_flat[flat].astype(np.float64)
+        x, y = across[tops.cols[part]] * d, down[tops.rows[part]] * d
+        pa = basis[0, 0] * x + basis[0, 1] * y + basis[0, 2] * d
+        pb = basis[1, 0] * x + basis[1, 1] * y + basis[1, 2] * d
+        ax, ay = p.rect.axis
+        u, v = pa * ax + pb * ay, pb * ax - pa * ay
+        bin_m = SEAM_BIN * p.footprint_m
+        at_u = segment.seam_lines(u, v, cut, shade, colour_step, bin_m)
+        at_v = segment.seam_lines(v, u, cut, shade, colour_step, bin_m)
+        if at_u or at_v:
+            cell = np.searchsorted(at_u, u) * (len(at_v) + 1) + np.searchsorted(at_v, v)
+            found.append((t, cell))
+    return found
+
+
+HUG_SHARE = 0.85
+"""A partly hidden top counts as a rectangle only if this share of its row ends seen (not
+hidden, not next to dropout) lies within ``HUG_FOOTPRINTS`` of its rectangle's sides ..."""
+HUG_FOOTPRINTS = 2.5
+SIDE_SEEN_SHARE = 0.05
+"""... and each of its four sides is seen (outline points within that band of it, not hidden)
+along at least this share of its length."""
+
+
+def _seen_fill(
+    t: int,
+    points: Float64Array,
+    ends: BoolArray,
+    hidden_points: BoolArray,
+    rect: Rectangle,
+    footprint_m: float,
+    whole_area_m2: float,
+    level_m: float,
+    rise_m: float,
+    top_flat: npt.NDArray[np.int32],
+    h_flat: Float32Array,
+    tops: _Tops,
+    across: Float64Array,
+    down: Float64Array,
+    basis: Float64Array,
+    lens: Intrinsics,
+    support: Support,
+) -> float:
+    """The share of the part of the top's rectangle not hidden by something in front that the
+    top fills; 0 when the outline seen does not hug the rectangle (not a rectangle).
+
+    The rectangle is the extreme outline points' (plus a footprint), as for the plain fill.
+    Each crop pixel whose ray meets the top's plane inside it counts with its area there;
+    those whose reading rises above the top (``rise_m``) are hidden and left out."""
+    if rect.hidden_sides or ends.sum() < 8:
+        return 0.0
+    ax = np.asarray(rect.axis)
+    perp = np.array([-ax[1], ax[0]])
+    # The outline seen must lie on the fitted rectangle's sides ...
+    local = points - np.asarray(rect.middle)
+    u, w = local @ ax, local @ perp
+    off_u = np.abs(np.abs(u) - rect.length_m / 2)
+    off_w = np.abs(np.abs(w) - rect.width_m / 2)
+    band = HUG_FOOTPRINTS * footprint_m
+    hug = float(np.mean(np.minimum(off_u, off_w)[ends] <= band))
+    if hug < HUG_SHARE:
+        return 0.0
+    # ... and every side be seen along a good part of it (or be met by a taller neighbour's
+    # wall: what rises past it stands at it): where something in front hides a whole side,
+    # the line it is cut along passes for one and the size is unknown.
+    # (Points within the band of a side's ends belong to the sides across it as well.)
+    seen = ~hidden_points
+    along_w = np.abs(w) < rect.width_m / 2 - band
+    along_u = np.abs(u) < rect.length_m / 2 - band
+    for on_side, length in (
+        (seen & (off_u <= band) & (u > 0) & along_w, rect.width_m),
+        (seen & (off_u <= band) & (u < 0) & along_w, rect.width_m),
+        (seen & (off_w <= band) & (w > 0) & along_u, rect.length_m),
+        (seen & (off_w <= band) & (w < 0) & along_u, rect.length_m),
+    ):
+        count = int(on_side.sum())
+        if count < 2 or count * footprint_m < SIDE_SEEN_SHARE * length:
+            return 0.0
+    along, side = points @ ax, points @ perp
+    half = 0.5 * footprint_m
+    lo_a, hi_a = float(along.min()) - half, float(along.max()) + half
+    lo_b, hi_b = float(side.min()) - half, float(side.max()) + half
+    # The rectangle's corners on the top's plane, into the (padded) crop's pixels.
+    n = basis[2]
+    lift = level_m - support.offset_camera_m
+    corners = np.array(
+        [
+            (a * ax[0] - b * ax[1]) * basis[0] + (a * ax[1] + b * ax[0]) * basis[1] + lift * n
+            for a in (lo_a, hi_a)
+            for b in (lo_b, hi_b)
+        ]
+    )
+    if (corners[:, 2] <= 0).any():
+        return 0.0
+    u = lens.fx * corners[:, 0] / corners[:, 2] + lens.cx - tops.shift[1]
+    v = lens.fy * corners[:, 1] / corners[:, 2] + lens.cy - tops.shift[0]
+    rows_n = len(h_flat) // tops.width
+    r0, r1 = max(int(v.min()), 0), min(math.ceil(v.max()) + 1, rows_n)
+    c0, c1 = max(int(u.min()), 0), min(math.ceil(u.max()) + 1, tops.width)
+    if r1 <= r0 or c1 <= c0:
+        return 0.0
+    ray_x = across[np.clip(np.arange(c0, c1) + tops.shift[1], 0, len(across) - 1)]
+    ray_y = down[np.clip(np.arange(r0, r1) + tops.shift[0], 0, len(down) - 1)]
+    slope = n[0] * ray_x[np.newaxis, :] + n[1] * ray_y[:, np.newaxis] + n[2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        depth = lift / slope
+    x, y = ray_x[np.newaxis, :] * depth, ray_y[:, np.newaxis] * depth
+    pa = basis[0, 0] * x + basis[0, 1] * y + basis[0, 2] * depth
+    pb = basis[1, 0] * x + basis[1, 1] * y + basis[1, 2] * depth
+    pa, pb = pa * ax[0] + pb * ax[1], pb * ax[0] - pa * ax[1]
+    inside = (depth > 0) & (pa >= lo_a) & (pa <= hi_a) & (pb >= lo_b) & (pb <= hi_b)
+    window = (slice(r0, r1), slice(c0, c1))
+    heights = h_flat.reshape(rows_n, tops.width)[window]
+    mine = top_flat.reshape(rows_n, tops.width)[window] == t + 1
+    with np.errstate(invalid="ignore"):
+        hidden = inside & ~mine & (heights > rise_m)
+    area = depth * depth / (np.abs(slope) * lens.fx * lens.fy)
+    seen_m2 = float(area[inside].sum() - area[hidden].sum())
+    if seen_m2 <= 0.0:
+        return 0.0
+    return min(whole_area_m2 / seen_m2, 1.0)
+
+
+RAGGED_TOLERANCE_M = 0.01
+"""A top whose height tolerance is wider than this (noise of 3 mm or more) is measured by its
+hull: a disc still fills pi/4 of its rectangle, a ragged rectangle nearly all of it ..."""
+RAGGED_MIN_FILL = 0.72
+"""... when its own readings fill at least this share of its rectangle."""
+
+
+def _hull_area(points: Float64Array, footprint_m: float) -> float:
+    """The area of the points' convex hull grown by half a footprint all round (outline pixel
+    middles lie half a footprint inside the edge)."""
+    try:
+        hull = spatial.ConvexHull(points)
+    except spatial.QhullError:  # all on a line: no area
+        return 0.0
+    half = 0.5 * footprint_m
+    # In 2-D, ConvexHull's "volume" is the area and its "area" the perimeter.
+    return float(hull.volume + hull.area * half + math.pi * half * half)
+
+
+LEDGE_REACH_PX = 12
+"""How far past a top's outline (pixels, along each off-top direction) the level just under
+it is looked for: a few pixels past a side seen edge-on, past the side face seen from the front."""
+
+
+def on_level_surface(
+    h_flat: Float32Array, flat: npt.NDArray[np.intp], width: int, limit: Float64Array | float
+) -> BoolArray:
+    """Whether the readings at these flat indices lie on a level surface: a neighbour across
+    and a neighbour down agree with each one within ``limit`` (a side face's level lines run
+    one way only; a rim of a lower top two pixels wide still has both)."""
+    size = len(h_flat)
+    here = h_flat[flat]
+    with np.errstate(invalid="ignore"):
+        across = (np.abs(h_flat[np.minimum(flat + 1, size - 1)] - here) < limit) | (
+            np.abs(h_flat[np.maximum(flat - 1, 0)] - here) < limit
+        )
+        down = (np.abs(h_flat[np.minimum(flat + width, size - 1)] - here) < limit) | (
+            np.abs(h_flat[np.maximum(flat - width, 0)] - here) < limit
+        )
+    result: BoolArray = across & down
+    return result
+
+
+def _ledges(
+    e_flat: npt.NDArray[np.intp],
+    e_top: npt.NDArray[np.int32],
+    label_at: npt.NDArray[np.int32],
+    h_flat: Float32Array,
+    width: int,
+    level: Float64Array,
+    tol: Float64Array,
+    footprint: Float64Array,
+    settings: FinderSettings,
+    count: int,
+) -> Float64Array:
+    """Per top, the highest flat level seen just past its outline, below it and above the
+    support (NaN: none). A box standing on a box that it nearly covers leaves only a rim of the
+    lower top, a few pixels wide and cut up by its edges: never a top of its own, yet a level
+    the box stands on. The candidate is checked by the probes (:func:`_bases`)."""
+    result = np.full(count, np.nan)
+    if len(e_flat) == 0:
+        return result
+    size = len(h_flat)
+    rows_all = size // width
+    rows, cols = np.divmod(e_flat, width)
+    own = e_top + 1
+    heights = []
+    which = []
+    where = []
+    reach = np.arange(1, LEDGE_REACH_PX + 1)
+    for dr, dc in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        off = label_at[e_flat + dr * width + dc] != own
+        r = rows[off, np.newaxis] + dr * reach
+        c = cols[off, np.newaxis] + dc * reach
+        inside = (r >= 0) & (r < rows_all) & (c >= 0) & (c < width)
+        flat = np.where(inside, r * width + c, 0)
+        seen = np.where(inside & (label_at[flat] != own[off, np.newaxis]), h_flat[flat], np.nan)
+        heights.append(seen.reshape(-1))
+        which.append(np.repeat(e_top[off], LEDGE_REACH_PX))
+        where.append(flat.reshape(-1))
+    values = np.concatenate(heights).astype(np.float64)
+    group = np.concatenate(which)
+    lowest = settings.min_height_m
+    with np.errstate(invalid="ignore"):
+        keep = (values > lowest) & (values < level[group] - np.maximum(2.0 * tol[group], lowest))
+    keep = np.flatnonzero(keep)
+    values, group = values[keep], group[keep]
+    # ... on a level surface (not a side face seen at a slant).
+    limit = np.minimum(tol, 0.5 * footprint)[group]
+    level_surface = on_level_surface(h_flat, np.concatenate(where)[keep], width, limit)
+    values, group = values[level_surface], group[level_surface]
+    if len(values) == 0:
+        return result
+    # Per top a histogram in bins of a third of the tolerance; a window of +-tol around each
+    # bin; the highest window holding enough readings is the ledge.
+    w = _windows(values, group, count, tol, lowest)
+    window, half, bin_m = w.counts, w.reach, w.bin_m
+    bins = window.shape[1]
+    columns = np.arange(bins)[np.newaxis, :]
+    total = np.bincount(group, minlength=count)[:, np.newaxis]
+    enough = window >= np.maximum(8, 0.05 * total)
+    has = enough.any(axis=1)
+    if not has.any():
+        return result
+    # The highest window holding enough is the top edge of the level's readings: the level is
+    # the fullest window within two tolerances below it.
+    top_bin = bins - 1 - np.argmax(enough[:, ::-1], axis=1)
+    span = (columns <= top_bin[:, np.newaxis]) & (columns >= top_bin[:, np.newaxis] - 2 * half)
+    peak = np.where(span, window, -1.0).argmax(axis=1)
+    centre = lowest + (peak + 0.5) * bin_m
+    near = np.abs(values - centre[group]) < tol[group]
+    sums = np.bincount(group[near], weights=values[near], minlength=count)
+    number = np.bincount(group[near], minlength=count)
+    found = has & (number > 0)
+    result[found] = sums[found] / number[found]
+    return result
+
+
+def _loose_groups(
+    p_idx: npt.NDArray[np.intp],
+    p_top: npt.NDArray[np.int32],
+    p_h: Float32Array,
+    level: Float64Array,
+    tol: Float64Array,
+    count: int,
+) -> list[npt.NDArray[np.intp]]:
+    """Per top, its piece's pixels within four tolerances below its height (the curvature
+    test's footprint)."""
+    keep = p_h > level[p_top] - 4.0 * tol[p_top]
+    which = p_top[keep]
+    order = np.argsort(which.astype(np.int16 if count < 32_000 else np.int32), kind="stable")
+    flat = p_idx[keep][order]
+    stops = np.cumsum(np.bincount(which, minlength=count))
+    return np.split(flat, stops[:-1])
+
+
+def _growth(
+    wide: npt.NDArray[np.intp],
+    tops: _Tops,
+    d_flat: Float32Array,
+    lens: Intrinsics,
+    basis: Float64Array,
+    outline: Float64Array,
+    axis: Float64Array,
+) -> float:
+    """How much a top's extent (along and across its axis) grows with the loose tolerance."""
+    rows, cols = np.divmod(wide, tops.width)
+    d = d_flat[wide].astype(np.float64)
+    x = (cols + tops.shift[1] - lens.cx) / lens.fx * d
+    y = (rows + tops.shift[0] - lens.cy) / lens.fy * d
+    perp = np.array([-axis[1], axis[0]])
+    flat_a = basis[0, 0] * x + basis[0, 1] * y + basis[0, 2] * d
+    flat_b = basis[1, 0] * x + basis[1, 1] * y + basis[1, 2] * d
+    along = flat_a * axis[0] + flat_b * axis[1]
+    side = flat_a * perp[0] + flat_b * perp[1]
+    before = max(float(np.ptp(outline @ axis)) * float(np.ptp(outline @ perp)), 1e-12)
+    return _spread(along) * _spread(side) / before
+
+
+def _spread(values: Float64Array) -> float:
+    """From the 1st to the 99th percentile."""
+    k = len(values) // 100
+    low, high = np.partition(values, (k, len(values) - 1 - k))[[k, len(values) - 1 - k]]
+    return float(high - low)
+
+
+def cross(a: Float64Array, b: Float64Array) -> Float64Array:
+    """a x b of two 3-vectors (np.cross costs tens of microseconds a call)."""
+    return np.array(
+        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    )
