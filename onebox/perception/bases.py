@@ -540,7 +540,9 @@ def find_bases(
         elif level is not None and level.is_box:
             box.on_plateau = level.label
     # A top walled in on two sides or more, at the height two touching boxes stand at, is
-    # that surface seen through a gap in a load (a carton missing): a level, not a box.
+    # that surface seen through a gap in a load (a carton missing): a level, not a box. The
+    # walls' tops stand off the part seen by what the walls hide of it (and any dropout band
+    # at their feet): that far more they still touch it.
     for i, box in enumerate(boxes):
         assert box.rect is not None
         if (
@@ -550,7 +552,7 @@ def find_bases(
                 and other.stands_on is not box
                 and other.base_m > 0
                 and abs(other.base_m - box.height_m) < max(box.tolerance_m, LEVEL_TOLERANCE_FLOOR_M)
-                and _touch(box, other)
+                and _touch(box, other, 0.02 + box.hidden_band_m)
                 for k, other in enumerate(boxes)
             )
             >= 2
@@ -870,10 +872,9 @@ def _inside(lower: Plateau, upper: Plateau) -> bool:
     )
 
 
-def _touch(a: Plateau, b: Plateau) -> bool:
-    """Whether two tops' rectangles (grown by 2 cm) overlap: side by side, touching."""
+def _touch(a: Plateau, b: Plateau, gap: float = 0.02) -> bool:
+    """Whether two tops' rectangles (grown by ``gap``, 2 cm) overlap: side by side, touching."""
     assert a.rect is not None and b.rect is not None
-    gap = 0.02
     for r, s in ((a.rect, b.rect), (b.rect, a.rect)):
         ax0, ax1 = r.axis
         for u0, u1 in ((ax0, ax1), (-ax1, ax0)):
