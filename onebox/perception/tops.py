@@ -757,10 +757,7 @@ def _measure_all(
     edge = np.flatnonzero(outline)
     e_flat, e_top = tops.flat[edge], top[edge]
     # The outline's points in the support plane (the rectangle needs no others).
-    de = d[edge].astype(np.float64)
-    xe, ye = across[tops.cols[edge]] * de, down[tops.rows[edge]] * de
-    a = basis[0, 0] * xe + basis[0, 1] * ye + basis[0, 2] * de
-    b = basis[1, 0] * xe + basis[1, 1] * ye + basis[1, 2] * de
+    a, b = _in_plane(basis, across[tops.cols[edge]], down[tops.rows[edge]], d[edge])
     fill_a, fill_b = _nearer_on_level(
         a, b, h_flat[e_flat], level[e_top], e_top, support.offset_camera_m, count
     )
@@ -797,11 +794,7 @@ def _measure_all(
                 up = h_flat[f] > e_level[at]
             f, on = f[up], at[up]
             r, c = np.divmod(f, tops.width)
-            df = d_flat[f].astype(np.float64)
-            xf = across[c + tops.shift[1]] * df
-            yf = down[r + tops.shift[0]] * df
-            pa = basis[0, 0] * xf + basis[0, 1] * yf + basis[0, 2] * df
-            pb = basis[1, 0] * xf + basis[1, 1] * yf + basis[1, 2] * df
+            pa, pb = _in_plane(basis, across[c + tops.shift[1]], down[r + tops.shift[0]], d_flat[f])
             stand_off[on] = np.fmin(stand_off[on], np.hypot(pa - a[on], pb - b[on]))
         unsure |= off & np.isnan(beyond)
         # Past a band with no reading (a stereo camera's at a depth edge, as wide as a steep
@@ -946,6 +939,18 @@ def _measure_all(
     return plateaus
 
 
+def _in_plane(
+    basis: Float64Array, ray_x: npt.ArrayLike, ray_y: npt.ArrayLike, depth: npt.ArrayLike
+) -> tuple[Float64Array, Float64Array]:
+    """The support plane's coordinates (``basis`` rows 0 and 1) of the points ``depth`` along
+    the rays (ray_x, ray_y, 1) of the camera's frame."""
+    d = np.asarray(depth, dtype=np.float64)
+    x, y = np.asarray(ray_x) * d, np.asarray(ray_y) * d
+    a: Float64Array = basis[0, 0] * x + basis[0, 1] * y + basis[0, 2] * d
+    b: Float64Array = basis[1, 0] * x + basis[1, 1] * y + basis[1, 2] * d
+    return a, b
+
+
 def _nearer_on_level(
     a: Float64Array,
     b: Float64Array,
@@ -1075,9 +1080,7 @@ def _seams(
         # Each pixel's ray met with the top's plane, not its reading: a stereo camera's noise
         # along the ray would smear the line over several footprints.
         d = (p.height_m - support.offset_camera_m) / s_flat[flat].astype(np.float64)
-        x, y = across[tops.cols[part]] * d, down[tops.rows[part]] * d
-        pa = basis[0, 0] * x + basis[0, 1] * y + basis[0, 2] * d
-        pb = basis[1, 0] * x + basis[1, 1] * y + basis[1, 2] * d
+        pa, pb = _in_plane(basis, across[tops.cols[part]], down[tops.rows[part]], d)
         ax, ay = p.rect.axis
         u, v = pa * ax + pb * ay, pb * ax - pa * ay
         bin_m = SEAM_BIN * p.footprint_m
@@ -1180,9 +1183,7 @@ def _seen_fill(
     slope = n[0] * ray_x[np.newaxis, :] + n[1] * ray_y[:, np.newaxis] + n[2]
     with np.errstate(divide="ignore", invalid="ignore"):
         depth = lift / slope
-    x, y = ray_x[np.newaxis, :] * depth, ray_y[:, np.newaxis] * depth
-    pa = basis[0, 0] * x + basis[0, 1] * y + basis[0, 2] * depth
-    pb = basis[1, 0] * x + basis[1, 1] * y + basis[1, 2] * depth
+    pa, pb = _in_plane(basis, ray_x[np.newaxis, :], ray_y[:, np.newaxis], depth)
     pa, pb = pa * ax[0] + pb * ax[1], pb * ax[0] - pa * ax[1]
     inside = (depth > 0) & (pa >= lo_a) & (pa <= hi_a) & (pb >= lo_b) & (pb <= hi_b)
     window = (slice(r0, r1), slice(c0, c1))
@@ -1344,12 +1345,13 @@ def _growth(
 ) -> float:
     """How much a top's extent (along and across its axis) grows with the loose tolerance."""
     rows, cols = np.divmod(wide, tops.width)
-    d = d_flat[wide].astype(np.float64)
-    x = (cols + tops.shift[1] - lens.cx) / lens.fx * d
-    y = (rows + tops.shift[0] - lens.cy) / lens.fy * d
     perp = np.array([-axis[1], axis[0]])
-    flat_a = basis[0, 0] * x + basis[0, 1] * y + basis[0, 2] * d
-    flat_b = basis[1, 0] * x + basis[1, 1] * y + basis[1, 2] * d
+    flat_a, flat_b = _in_plane(
+        basis,
+        (cols + tops.shift[1] - lens.cx) / lens.fx,
+        (rows + tops.shift[0] - lens.cy) / lens.fy,
+        d_flat[wide],
+    )
     along = flat_a * axis[0] + flat_b * axis[1]
     side = flat_a * perp[0] + flat_b * perp[1]
     before = max(float(np.ptp(outline @ axis)) * float(np.ptp(outline @ perp)), 1e-12)
