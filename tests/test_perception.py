@@ -154,6 +154,34 @@ def test_no_box_on_an_empty_noisy_table(seed):
     assert found.boxes == []
 
 
+@pytest.mark.parametrize(("x_m", "tilt_deg"), [(-0.25, 20.0), (0.25, 20.0), (0.3, 0.0)])
+def test_a_top_afloat_over_the_table_is_no_box(x_m, tilt_deg):
+    """A stereo camera's mismatch floats a patch of readings above the table. The camera sees
+    the table under it, which no box standing there would let it: no box. The same top on a
+    box of its own footprint is one."""
+    camera = Camera.tilted(1.0, tilt_deg)
+    afloat = Box(centre=(x_m, 0.0, 0.25), size=(0.06, 0.05, 0.004))
+    standing = box_on(Plane(), x_m, 0.0, (0.06, 0.05, 0.252))
+    for shape, count in ((afloat, 0), (standing, 1)):
+        depth, _ = render(Scene(camera, Plane(), (shape,)))
+        found = find_boxes(depth, camera.lens, camera.camera_to_world)
+        assert len(found.boxes) == count, shape
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_no_box_in_far_d435_speckle_clumps(seed):
+    """Empty tables 1.5-2 m under a D435's noise: its speckles are clumps of up to 4 x 4
+    pixels 10-70 % nearer than the table, flat, the size of a small box's top there."""
+    rng = np.random.default_rng(seed)
+    found = []
+    for _ in range(12):
+        camera = Camera.tilted(float(rng.uniform(1.5, 2.0)), float(rng.uniform(0, 30)))
+        depth, _ = render(Scene(camera, Plane()))
+        noisy = add_noise(depth, Noise.d435(), rng)
+        found += find_boxes(noisy, camera.lens, camera.camera_to_world).boxes
+    assert found == []
+
+
 def test_stacked_box_reports_what_it_stands_on():
     """A box on a box: two boxes, the upper one `on` the lower, its own height."""
     lower = box_on(Plane(), 0.0, 0.0, (0.2, 0.15, 0.08), 10.0)

@@ -147,6 +147,96 @@ def shadowed_sides(boxes: list[Plateau], camera_height_m: float, settings: Finde
             )
 
 
+UNDER_FRACTIONS = np.linspace(-0.25, 0.25, 5)
+"""Where a top's footprint is looked under: a grid over its middle half each way. A far,
+narrow top's rectangle may be off by a centimetre, and its middle is still over the box."""
+SEEN_UNDER_SHARE = 0.9
+"""A top under which the camera sees through, on one level, at this share of the grid,
+floats: no box stands there. A real box's rarely passes 0.5 (a box across a narrower one, its
+base not found); a floating clump's is 1 on some level."""
+
+
+def seen_under(
+    boxes: list[Plateau], depth_m: Float32Array, lens: Intrinsics, support: Support
+) -> BoolArray:
+    """Per box, whether the camera sees through it: the box it would be does not stand there.
+    A solid box hides every point inside it and under it, so the ray to one meets the box's
+    surface first, nearer. A top afloat (a clump of a stereo camera's mismatched readings, or
+    flying pixels) shows the table under it, from the side; looking straight down on it,
+    nothing shows and this cannot tell. Looked at on a grid over the footprint's middle, at
+    three levels: the base's and the support's (through: a reading at the level, within the
+    noise or half the way back to where the ray enters the box), and halfway up the box (a
+    reading clearly past the point)."""
+    result: BoolArray = np.zeros(len(boxes), dtype=bool)
+    measured = [i for i, b in enumerate(boxes) if b.rect is not None]
+    boxes = [boxes[i] for i in measured]
+    rects = [b.rect for b in boxes if b.rect is not None]
+    if not rects:
+        return result
+    rows_n, cols_n = depth_m.shape
+    cam = plane_basis(support, None)
+    middle = np.array([r.middle for r in rects])  # boxes x 2
+    ax = np.array([r.axis for r in rects])
+    across = np.stack([-ax[:, 1], ax[:, 0]], axis=1)
+    f_len, f_wid = (f.reshape(-1) for f in np.meshgrid(UNDER_FRACTIONS, UNDER_FRACTIONS))
+    length = np.array([r.length_m for r in rects])[:, np.newaxis, np.newaxis]
+    width = np.array([r.width_m for r in rects])[:, np.newaxis, np.newaxis]
+    flat = (
+        middle[:, np.newaxis]
+        + f_len[:, np.newaxis] * length * ax[:, np.newaxis]
+        + f_wid[:, np.newaxis] * width * across[:, np.newaxis]
+    )  # boxes x samples x 2
+    # Its base's level and the support's (under a box on another box, or on a ledge of its
+    # own, the support is hidden too; an overhang hides less than half of it), where a reading
+    # at the level is seen through the box; and halfway up, inside the box, where only one
+    # clearly past the point is.
+    base = np.array([b.base_m for b in boxes])
+    top = np.array([b.height_m for b in boxes])
+    level = np.stack([base, np.zeros_like(base), 0.5 * (base + top)], axis=1)  # boxes x 3
+    pts = (
+        flat[:, np.newaxis, :, :1] * cam[0]
+        + flat[:, np.newaxis, :, 1:] * cam[1]
+        + (level - support.offset_camera_m)[:, :, np.newaxis, np.newaxis] * cam[2]
+    )  # boxes x levels x samples x 3
+    z = pts[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.rint(lens.fx * pts[..., 0] / z + lens.cx)
+        v = np.rint(lens.fy * pts[..., 1] / z + lens.cy)
+        # Where the ray to the point enters the box, as a share of the way from the camera
+        # (at (0, 0) on the plane, at height offset): the slabs' entries, the latest of them.
+        camera = -middle[:, np.newaxis]  # boxes x 1 x 2, from the rectangle's middle
+        enter = np.zeros(z.shape)
+        for axis, half in ((ax, length), (across, width)):
+            c0 = (camera * axis[:, np.newaxis]).sum(-1)
+            d0 = (flat * axis[:, np.newaxis]).sum(-1)  # boxes x samples
+            near = np.minimum((-half[..., 0] - c0) / d0, (half[..., 0] - c0) / d0)
+            enter = np.maximum(enter, np.where(d0 != 0, near, 0.0)[:, np.newaxis])
+        down = level - support.offset_camera_m  # the camera is at height offset
+        near_h = np.minimum(
+            (base - support.offset_camera_m)[:, np.newaxis] / down,
+            (top - support.offset_camera_m)[:, np.newaxis] / down,
+        )
+        enter = np.maximum(enter, near_h[..., np.newaxis])
+        gap = (1.0 - np.clip(enter, 0.0, 1.0)) * z
+    inside = (z > 0) & (u >= 0) & (u < cols_n) & (v >= 0) & (v < rows_n)
+    seen = np.where(
+        inside,
+        depth_m[np.where(inside, v, 0).astype(np.intp), np.where(inside, u, 0).astype(np.intp)],
+        np.nan,
+    )
+    noise = np.maximum(3.0 * support.sigma_at(z), LEVEL_TOLERANCE_FLOOR_M)
+    margin = np.minimum(noise, 0.5 * gap)
+    margin[:, 2] = -noise[:, 2]
+    with np.errstate(invalid="ignore"):
+        through = (seen > z - margin).sum(axis=-1)  # boxes x levels
+    looked = inside.sum(axis=-1)
+    share = through / np.maximum(looked, 1)
+    result[measured] = ((looked >= 0.5 * inside.shape[-1]) & (share >= SEEN_UNDER_SHARE)).any(
+        axis=1
+    )
+    return result
+
+
 def extent_unknown(box: Plateau) -> bool:
     """Whether a box's top may go on far past what is seen: a side is hidden, and what hides
     it stands well off the top's edge (a taller object between the top and the camera hides

@@ -177,10 +177,12 @@ def find_boxes(
     bases.find_bases(boxes, plateaus, height_m, labels_top, lens, support, settings)
     bases.raise_to_faces(boxes, plateaus, depth, colour, lens, support, settings)
     bases.shadowed_sides(boxes, support.offset_camera_m, settings)
+    afloat = bases.seen_under(boxes, depth, lens, support)
     reported = [
         b
-        for b in boxes
-        if not b.platform
+        for b, floats in zip(boxes, afloat, strict=True)
+        if not floats
+        and not b.platform
         and not bases.extent_unknown(b)
         and b.rect is not None
         and b.rect.width_m >= tops.MIN_WIDTH_M
