@@ -17,6 +17,7 @@ from onebox.testing.raycast import (
     Box,
     Camera,
     Cylinder,
+    Mark,
     Noise,
     Plane,
     Scene,
@@ -25,6 +26,7 @@ from onebox.testing.raycast import (
     box_on,
     loaded_pallet,
     render,
+    taped,
 )
 from onebox.world.noise import PRESETS, DepthNoise
 
@@ -812,3 +814,73 @@ def test_cartons_of_a_row_a_little_taller_than_their_neighbours_stand_on_the_flo
     assert len(found.boxes) == len(cartons)
     for box, true in match(found.boxes, tuple(cartons)):
         assert box.size[2] == pytest.approx(true.size[2], abs=0.002)
+
+
+BROWN = (150, 110, 70)
+
+
+def one_shade_pallet(noisy: bool, marked=lambda carton: carton):
+    """The loaded pallet with every carton one brown (``marked`` adds tape or a label), and
+    the boxes found on it."""
+    pallet, cartons, camera = loaded_pallet(np.random.default_rng(0))
+    cartons = [marked(dataclasses.replace(c, colour=BROWN)) for c in cartons]
+    depth, colour = render(Scene(camera, Plane(), (pallet, *cartons)))
+    if noisy:
+        depth = add_noise(depth, Noise.d435(), np.random.default_rng(1))
+    return tuple(cartons), find_boxes(depth, camera.lens, camera.camera_to_world, colour).boxes
+
+
+@pytest.mark.parametrize(
+    ("tape", "flap_line", "noisy"),
+    [
+        ((185, 140, 90), None, False),
+        ((185, 140, 90), None, True),
+        ((160, 118, 76), (96, 70, 45), False),
+        ((160, 118, 76), (96, 70, 45), True),
+        ((230, 230, 225), None, True),
+    ],
+)
+def test_taped_cartons_of_one_shade_are_one_box_each(tape, flap_line, noisy):
+    """A pallet of cartons of one brown, each taped along its top's middle (brown tape, clear
+    tape showing the line where the flaps meet, white tape): the tape and the flaps are one
+    top, and the boxes are those found on the same cartons untaped."""
+    cartons, plain = one_shade_pallet(noisy)
+    _, found = one_shade_pallet(noisy, lambda c: taped(c, tape, flap_line=flap_line))
+    assert len(plain) == 12
+    assert len(found) == 12, sorted(b.size[:2] for b in found)
+    centre_mm, size_mm = (10.0, 20.0) if noisy else (3.0, 5.0)
+    for box, true in match(found, cartons):
+        assert math.dist(box.centre[:2], true.centre[:2]) * 1e3 < centre_mm
+        assert abs(box.size[0] - max(true.size[:2])) * 1e3 < size_mm
+        assert abs(box.size[1] - min(true.size[:2])) * 1e3 < size_mm
+        untaped = min(plain, key=lambda b: math.dist(b.centre, box.centre))
+        assert math.dist(box.centre, untaped.centre) < 0.001
+        assert np.allclose(box.size, untaped.size, atol=0.001)
+
+
+@pytest.mark.parametrize("noisy", [False, True])
+def test_a_label_on_a_carton_is_part_of_its_top(noisy):
+    """A white shipping label inside each carton's top is print, not a box on it: the boxes are
+    those found on the same cartons unlabelled."""
+    label = Mark((0.0, 0.1), (-0.075, -0.005), (240, 240, 235))
+    _, plain = one_shade_pallet(noisy)
+    _, found = one_shade_pallet(noisy, lambda c: dataclasses.replace(c, marks=(label,)))
+    assert len(found) == 12, sorted(b.size[:2] for b in found)
+    for box in found:
+        unlabelled = min(plain, key=lambda b: math.dist(b.centre, box.centre))
+        assert math.dist(box.centre, unlabelled.centre) < 0.001
+        assert np.allclose(box.size, unlabelled.size, atol=0.001)
+
+
+def test_side_by_side_cartons_of_two_widths_stay_two():
+    """Two cartons of one shade and length side by side, 12 and 9 cm wide: their seam runs
+    along the whole's length, but off its middle, so it is no flap line; two boxes."""
+    plane = Plane()
+    a = box_on(plane, 0.0, -0.06, (0.3, 0.12, 0.1), 0.0, BROWN)
+    b = box_on(plane, 0.0, 0.045, (0.3, 0.09, 0.1), 0.0, BROWN)
+    camera = Camera.tilted(0.9, 15.0, width=640, height=480)
+    depth, colour = render(Scene(camera, plane, (a, b), seam_m=0.003))
+    found = find_boxes(depth, camera.lens, camera.camera_to_world, colour)
+    assert len(found.boxes) == 2
+    for box, true in match(found.boxes, (a, b)):
+        assert box.size[1] == pytest.approx(true.size[1], abs=0.004)

@@ -338,6 +338,26 @@ def plateaus(
         if not cells:
             break
         level, tol, tops_n = _split_tops(top_flat, tops, cells, level, tol, h_flat, p_idx, p_top)
+    groups = [] if colour_cut is None else _one_carton(plateaus, top_lab, lens, support, tops.shift)
+    if groups:
+        level, tol, tops_n = _merge_tops(top_flat, groups, level, tol, h_flat, p_idx, p_top)
+        tops = _Tops.gather(top_lab, tops_n, PAD, (r0, c0))
+        plateaus = _measure_all(
+            tops,
+            top_flat,
+            h_flat,
+            d_flat,
+            s_flat,
+            level,
+            tol,
+            p_idx,
+            p_top,
+            p_h,
+            lens,
+            support,
+            settings,
+            depth.shape,
+        )
     labels_top[crop] = top_lab[PAD:-PAD, PAD:-PAD]
     return plateaus, height, labels_top
 
@@ -1031,6 +1051,244 @@ def _split_tops(
     own = _levels(h_flat[on], top_flat[on] - 1, count, tol)
     level[split] = own[split]
     return level, tol, count
+
+
+PARALLEL_SIN = math.sin(math.radians(4.0))
+"""Two pieces of one carton's top lie parallel within this angle (4 degrees)."""
+
+
+def _one_carton(
+    plateaus: list[Plateau],
+    top_lab: npt.NDArray[np.int32],
+    lens: Intrinsics,
+    support: Support,
+    shift: tuple[int, int],
+) -> list[list[int]]:
+    """Pieces of one carton's top that its own print cut apart by colour, as groups of top
+    labels to join: a label or a print (a piece at the top's level with the top all round
+    it), and a taped carton's flaps and tape (pieces side by side along their length, of one
+    length, their widths symmetric about the middle line of the whole, which runs along its
+    length: a carton's flaps meet on the middle line along its length, and the tape covers
+    it). Touching cartons of one height stay apart: a row end to end meets across its length,
+    and two side by side make one top only if each is under half as wide as long."""
+    placed = [p for p in plateaus if p.rect is not None]
+    joined = {p.label: p.label for p in placed}
+
+    def root(label: int) -> int:
+        while joined[label] != label:
+            label = joined[label]
+        return label
+
+    def level_with(a: Plateau, b: Plateau) -> bool:
+        return abs(a.height_m - b.height_m) < max(
+            math.hypot(a.tolerance_m, b.tolerance_m), FLAT_REACH_M
+        )
+
+    cam = plane_basis(support, None)
+    for inner in placed:
+        for outer in placed:
+            if (
+                outer is not inner
+                and _rect_area(outer) > _rect_area(inner)
+                and level_with(outer, inner)
+                and _within(inner, outer)
+                and _surrounded(inner, outer, top_lab, lens, support, cam, shift)
+            ):
+                joined[inner.label] = outer.label
+                break
+    hosts = [p for p in placed if joined[p.label] == p.label]
+    row_of = {p.label: p.label for p in hosts}
+
+    def row_root(label: int) -> int:
+        while row_of[label] != label:
+            label = row_of[label]
+        return label
+
+    for i, a in enumerate(hosts):
+        for b in hosts[i + 1 :]:
+            if level_with(a, b) and _side_by_side(a, b):
+                row_of[row_root(b.label)] = row_root(a.label)
+    rows: dict[int, list[int]] = {}
+    for p in hosts:
+        rows.setdefault(row_root(p.label), []).append(p.label)
+    by_label = {p.label: p for p in hosts}
+    for row in rows.values():
+        if len(row) < 2:
+            continue
+        for group in _flaps_and_tape([by_label[t] for t in row]):
+            for t in group[1:]:
+                joined[t] = group[0]
+    groups: dict[int, list[int]] = {}
+    for label in joined:
+        groups.setdefault(root(label), []).append(label)
+    return [sorted(g) for g in groups.values() if len(g) > 1]
+
+
+def _rect_area(top: Plateau) -> float:
+    return top.rect.length_m * top.rect.width_m if top.rect is not None else 0.0
+
+
+def _within(inner: Plateau, outer: Plateau) -> bool:
+    """Whether ``inner``'s rectangle lies inside ``outer``'s, give or take 2 cm."""
+    assert inner.rect is not None and outer.rect is not None
+    a, b = inner.rect, outer.rect
+    cos, sin = b.axis
+    mx, my = a.middle[0] - b.middle[0], a.middle[1] - b.middle[1]
+    along, across = mx * cos + my * sin, my * cos - mx * sin
+    # The inner's half extents along the outer's axes.
+    c = abs(a.axis[0] * cos + a.axis[1] * sin)
+    s_ = math.sqrt(max(0.0, 1.0 - c * c))
+    half_along = (a.length_m * c + a.width_m * s_) / 2
+    half_across = (a.length_m * s_ + a.width_m * c) / 2
+    return (
+        abs(along) + half_along <= b.length_m / 2 + 0.02
+        and abs(across) + half_across <= b.width_m / 2 + 0.02
+    )
+
+
+def _surrounded(
+    inner: Plateau,
+    outer: Plateau,
+    top_lab: npt.NDArray[np.int32],
+    lens: Intrinsics,
+    support: Support,
+    cam: Float64Array,
+    shift: tuple[int, int],
+) -> bool:
+    """Whether ``outer``'s pixels lie just past each side of ``inner``'s rectangle (on at least
+    three of five points along the side), or past three sides, the fourth on ``outer``'s own
+    edge (a flap of a carton taped round its ends as well, an H of tape round it)."""
+    assert inner.rect is not None and outer.rect is not None
+    rect = inner.rect
+    ax = np.asarray(rect.axis)
+    perp = np.array([-ax[1], ax[0]])
+    out = max(0.006, 4.0 * inner.footprint_m)
+    along = np.linspace(-0.35, 0.35, 5)
+    points = []
+    for normal, side, half, half_side in (
+        (ax, perp, rect.length_m / 2, rect.width_m / 2),
+        (-ax, perp, rect.length_m / 2, rect.width_m / 2),
+        (perp, ax, rect.width_m / 2, rect.length_m / 2),
+        (-perp, ax, rect.width_m / 2, rect.length_m / 2),
+    ):
+        points.append(
+            np.asarray(rect.middle)
+            + (half + out) * normal
+            + (2.0 * half_side * along)[:, np.newaxis] * side
+        )
+    flat = np.concatenate(points)  # 20 x 2
+    pts = (
+        flat[:, :1] * cam[0]
+        + flat[:, 1:] * cam[1]
+        + (inner.height_m - support.offset_camera_m) * cam[2]
+    )
+    z = pts[:, 2]
+    if np.any(z <= 0):
+        return False
+    col = np.rint(lens.fx * pts[:, 0] / z + lens.cx).astype(np.intp) - shift[1]
+    row = np.rint(lens.fy * pts[:, 1] / z + lens.cy).astype(np.intp) - shift[0]
+    inside = (row >= 0) & (row < top_lab.shape[0]) & (col >= 0) & (col < top_lab.shape[1])
+    hit = np.zeros(len(z), dtype=bool)
+    hit[inside] = top_lab[row[inside], col[inside]] == outer.label + 1
+    bordered = hit.reshape(4, -1).sum(axis=1) >= 3
+    if bordered.all():
+        return True
+    if bordered.sum() < 3:
+        return False
+    k = int(np.argmin(bordered))
+    normal = (ax, -ax, perp, -perp)[k]
+    own = float(np.asarray(rect.middle) @ normal) + (rect.length_m if k < 2 else rect.width_m) / 2
+    o = outer.rect
+    o_ax = np.asarray(o.axis)
+    reach = (
+        float(np.asarray(o.middle) @ normal)
+        + o.length_m / 2 * abs(float(normal @ o_ax))
+        + o.width_m / 2 * abs(float(normal @ np.array([-o_ax[1], o_ax[0]])))
+    )
+    return abs(reach - own) < max(0.015, 3.0 * outer.footprint_m)
+
+
+def _side_by_side(a: Plateau, b: Plateau) -> bool:
+    """Two tops lying parallel, of one length, ends level, their long sides touching."""
+    assert a.rect is not None and b.rect is not None
+    ax, bx = np.asarray(a.rect.axis), np.asarray(b.rect.axis)
+    if abs(ax[0] * bx[1] - ax[1] * bx[0]) > PARALLEL_SIN:
+        return False
+    length = max(a.rect.length_m, b.rect.length_m)
+    slack = max(0.012, 0.05 * length)
+    if abs(a.rect.length_m - b.rect.length_m) > slack:
+        return False
+    offset = np.asarray(b.rect.middle) - np.asarray(a.rect.middle)
+    if abs(offset @ ax) > slack:
+        return False
+    gap = abs(float(offset @ np.array([-ax[1], ax[0]]))) - (a.rect.width_m + b.rect.width_m) / 2
+    return -0.01 < gap < max(0.015, 4.0 * max(a.footprint_m, b.footprint_m))
+
+
+def _flaps_and_tape(row: list[Plateau]) -> list[list[int]]:
+    """A row of pieces side by side (:func:`_side_by_side`), split into cartons from one end:
+    the most pieces (up to four) whose widths mirror about their middle, the inner ones
+    narrower than the outer (the tape, or its halves), no wider together than long."""
+    assert row[0].rect is not None
+    ax = np.asarray(row[0].rect.axis)
+    perp = np.array([-ax[1], ax[0]])
+    row = sorted(row, key=lambda p: float(np.asarray(p.rect.middle) @ perp) if p.rect else 0.0)
+    across = [float(np.asarray(p.rect.middle) @ perp) for p in row if p.rect is not None]
+    widths = [p.rect.width_m for p in row if p.rect is not None]
+    lengths = [p.rect.length_m for p in row if p.rect is not None]
+    groups = []
+    start = 0
+    while start < len(row) - 1:
+        for size in (4, 3, 2):
+            end = start + size
+            if end > len(row):
+                continue
+            w = widths[start:end]
+            whole = across[end - 1] + w[-1] / 2 - (across[start] - w[0] / 2)
+            slack = max(0.012, 0.12 * whole)
+            mirrored = all(abs(w[k] - w[-1 - k]) < slack for k in range(size // 2))
+            inner_narrower = size == 2 or max(w[1:-1]) < 0.8 * min(w[0], w[-1])
+            if mirrored and inner_narrower and whole <= 1.05 * max(lengths[start:end]):
+                groups.append([p.label for p in row[start:end]])
+                start = end
+                break
+        else:
+            start += 1
+    return groups
+
+
+def _merge_tops(
+    top_flat: npt.NDArray[np.int32],
+    groups: list[list[int]],
+    level: Float64Array,
+    tol: Float64Array,
+    h_flat: Float32Array,
+    p_idx: npt.NDArray[np.intp],
+    p_top: npt.NDArray[np.int32],
+) -> tuple[Float64Array, Float64Array, int]:
+    """Each group of tops becomes one (the labels renumbered from 0 without gaps);
+    ``top_flat`` and ``p_top`` are relabelled in place; returns the levels and tolerances, one
+    per top, and the number of tops."""
+    target = np.arange(len(level))
+    for group in groups:
+        target[group] = group[0]
+    kept = np.unique(target)
+    new = np.searchsorted(kept, target)
+    lut = np.concatenate([[0], new + 1]).astype(np.int32)
+    labelled = np.flatnonzero(top_flat)
+    top_flat[labelled] = lut[top_flat[labelled]]
+    p_top[:] = new[p_top]
+    count = len(kept)
+    merged_tol = np.zeros(count)
+    np.maximum.at(merged_tol, new, tol)
+    merged_level = level[kept]
+    joined = np.unique(new[[g[0] for g in groups]])
+    is_joined = np.zeros(count + 1, dtype=bool)
+    is_joined[joined + 1] = True
+    on = labelled[is_joined[top_flat[labelled]]]
+    own = _levels(h_flat[on], top_flat[on] - 1, count, merged_tol)
+    merged_level[joined] = own[joined]
+    return merged_level, merged_tol, count
 
 
 def _connected(flat: npt.NDArray[np.intp], width: int) -> list[npt.NDArray[np.intp]]:

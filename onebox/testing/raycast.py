@@ -14,7 +14,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -130,6 +130,16 @@ class Plane:
 
 
 @dataclass(frozen=True)
+class Mark:
+    """A patch of another colour on a box's top (a label, packing tape, a print): ``x`` and
+    ``y`` ranges in the box's own axes, from the top's middle; drawn in order."""
+
+    x: tuple[float, float]
+    y: tuple[float, float]
+    colour: Rgb
+
+
+@dataclass(frozen=True)
 class Box:
     """A box: ``centre`` of the whole box, ``size`` along its own x, y, z, ``rotation`` 3 x 3."""
 
@@ -140,6 +150,7 @@ class Box:
     lid_m: float = 0.0
     """The lid bulges up (+) or sags (-) this much at its middle, smoothly to flat at its rim
     (cos x cos), as an overfilled or a soft carton's does; ``size`` is to the rim."""
+    marks: tuple[Mark, ...] = ()
 
     @property
     def matrix(self) -> Float64Array:
@@ -212,6 +223,28 @@ def box_on(
         rows,  # type: ignore[arg-type]
         colour,
     )
+
+
+def taped(
+    box: Box,
+    colour: Rgb = (185, 140, 90),
+    width_m: float = 0.048,
+    flap_line: Rgb | None = None,
+) -> Box:
+    """``box`` as a taped carton: packing tape ``width_m`` wide along the middle of its top's
+    longer side, where its flaps meet, and the line between the flaps (``flap_line``: seen
+    through clear tape) drawn 3 mm wide over it."""
+    along_x = box.size[0] >= box.size[1]
+    long_half = max(box.size[0], box.size[1]) / 2
+    marks = []
+    for half_width, mark_colour in ((width_m / 2, colour), (0.0015, flap_line)):
+        if mark_colour is None:
+            continue
+        span, across = (-long_half, long_half), (-half_width, half_width)
+        marks.append(
+            Mark(span, across, mark_colour) if along_x else Mark(across, span, mark_colour)
+        )
+    return replace(box, marks=(*box.marks, *marks))
 
 
 @dataclass(frozen=True)
@@ -386,16 +419,29 @@ def render(scene: Scene) -> tuple[Float32Array, npt.NDArray[np.uint8]]:
             dark = np.where(
                 on_top & (rim < scene.seam_m), 1.0 - (1.0 - scene.seam_shade) * (1.0 - fade), 1.0
             )
+            paint = np.broadcast_to(np.asarray(shape_.colour, dtype=np.float64), (*shape, 3))
+            if shape_.marks:
+                paint = paint.copy()
+                for mark in shape_.marks:
+                    paint[
+                        on_top
+                        & (local[..., 0] >= mark.x[0])
+                        & (local[..., 0] <= mark.x[1])
+                        & (local[..., 1] >= mark.y[0])
+                        & (local[..., 1] <= mark.y[1])
+                    ] = mark.colour
         elif isinstance(shape_, Cylinder):
             t, nrm = _hit_cylinder(origin, dirs, shape_)
             dark = np.ones(shape)
+            paint = np.broadcast_to(np.asarray(shape_.colour, dtype=np.float64), (*shape, 3))
         else:
             t, nrm = _hit_sphere(origin, dirs, shape_)
             dark = np.ones(shape)
+            paint = np.broadcast_to(np.asarray(shape_.colour, dtype=np.float64), (*shape, 3))
         hit = t < depth
         depth[hit] = t[hit]
         normal[hit] = nrm[hit]
-        base[hit] = shape_.colour
+        base[hit] = paint[hit]
         shade_mul[hit] = dark[hit]
     light = _unit((0.3, 0.2, 1.0))
     shade = 0.35 + 0.65 * np.abs(normal @ light)
