@@ -5,7 +5,7 @@
 
 Builds each world the way ``onebox sim`` does (random scenes from seeds, 640 x 480 with an
 hfov of 60 degrees unless told otherwise; random loaded pallets from seeds
-(:func:`onebox.world.random_scene.random_pallet`); scene/pallet.toml,
+(:func:`onebox.world.random_scene.random_pallet`), the same pallets taped; scene/pallet.toml,
 scene/clutter.toml, the seed's world), renders colour and depth with MuJoCo, adds the depth
 noise, and runs the box finder the locator runs (``onebox.perception.boxes.BoxFinder``) on the
 picture, the lens the sim publishes and the camera's pose, and judges what it finds against
@@ -118,8 +118,8 @@ def main() -> None:
             for s in range(args.seed, args.seed + args.empty)
         ]
 
-    def pallets() -> list[SceneDesc]:
-        return [random_pallet(s) for s in range(args.seed, args.seed + args.pallets)]
+    def pallets(taped: bool = False) -> list[SceneDesc]:
+        return [random_pallet(s, taped=taped) for s in range(args.seed, args.seed + args.pallets)]
 
     cases: list[tuple[str, list[SceneDesc] | None, NoiseSpec | None]] = [
         ("seed's world, noise-free", [seed_scene()], PRESETS["none"]),
@@ -143,6 +143,8 @@ def main() -> None:
         ("empty tables, azure_kinect", None, PRESETS["azure_kinect"]),
         ("random pallets, noise-free", None, PRESETS["none"]),
         ("random pallets, d435", None, PRESETS["d435"]),
+        ("random pallets taped, noise-free", None, PRESETS["none"]),
+        ("random pallets taped, d435", None, PRESETS["d435"]),
         ("pallet, d435", [spec.load(SCENES / "pallet.toml")], PRESETS["d435"]),
         ("pallet, azure_kinect", [spec.load(SCENES / "pallet.toml")], PRESETS["azure_kinect"]),
         ("clutter, d435", [spec.load(SCENES / "clutter.toml")], PRESETS["d435"]),
@@ -155,7 +157,7 @@ def main() -> None:
             if title.startswith("empty"):
                 scenes = empty()
             elif title.startswith("random pallets"):
-                scenes = pallets()
+                scenes = pallets(taped="taped" in title)
             else:
                 scenes = randoms(8, 3)
         errors = Errors()

@@ -15,7 +15,7 @@ from scipy.spatial.transform import Rotation
 
 from onebox.errors import SceneError
 from onebox.world import scene, spec
-from onebox.world.random_scene import random_scene
+from onebox.world.random_scene import random_pallet, random_scene
 from onebox.world.render import Capture, SceneRenderer
 from onebox.world.spec import CameraDesc, SceneDesc, TableDesc
 from schemas import GroundTruth
@@ -243,3 +243,19 @@ def test_a_bad_scene_is_one_line_naming_the_key(text: str, named: str) -> None:
         spec.parse(tomllib.loads(text), "bad.toml")
     message = str(e.value)
     assert named in message and message.startswith("bad.toml: ") and "\n" not in message
+
+
+def test_taped_cartons_through_a_scene_file() -> None:
+    """``tape = true`` puts packing tape on a box's top; it goes through a scene file, and a
+    value that is not true or false is a clear error."""
+    taped = random_pallet(3, taped=True)
+    assert not taped.boxes[0].tape and all(box.tape for box in taped.boxes[1:])
+    assert spec.parse(tomllib.loads(spec.dumps(taped))) == taped
+    plain = random_pallet(3)
+    assert [dataclasses.replace(box, tape=False) for box in taped.boxes] == list(plain.boxes)
+    _, _, with_tape = render(taped)
+    _, _, without = render(plain)
+    assert with_tape.rgb.tobytes() != without.rgb.tobytes()
+    bad = {"box": [{"x": 0.0, "y": 0.0, "size": [0.1, 0.1, 0.1], "tape": "yes"}]}
+    with pytest.raises(SceneError, match=r"box\[0\]\.tape = 'yes': expected true or false"):
+        spec.parse(bad)

@@ -246,12 +246,13 @@ CARTON_SIZES_M = (
 """The cartons a pallet is loaded with, one size a pallet."""
 
 
-def random_pallet(seed: int, width: int = 640, height: int = 480) -> SceneDesc:
+def random_pallet(seed: int, width: int = 640, height: int = 480, taped: bool = False) -> SceneDesc:
     """A loaded pallet drawn from ``seed``: cartons of one size in rows, touching or a few
     millimetres apart, inset 0-6 cm from the pallet's edges, of one shade give or take; one
     place in seven left empty, one carton in five of another height, one in three carrying a
     smaller carton. The camera, 1.6-2.6 m over the floor and tilted up to 25 degrees, looks at
-    the pallet's middle. Box 0 is the pallet itself."""
+    the pallet's middle. Box 0 is the pallet itself. ``taped``: every carton has packing tape
+    along its top (the same pallet otherwise)."""
     rng = np.random.default_rng(seed)
     yaw = float(rng.uniform(0.0, 90.0))
     c, s = math.cos(math.radians(yaw)), math.sin(math.radians(yaw))
@@ -278,7 +279,9 @@ def random_pallet(seed: int, width: int = 640, height: int = 480) -> SceneDesc:
             u, v = x0 + i * (length + gap), y0 + j * (width_m + gap)
             x, y = _round(u * c - v * s, 1e-4), _round(u * s + v * c, 1e-4)
             h = tall if rng.random() < 0.8 else _round(tall * float(rng.uniform(0.5, 1.3)), 0.001)
-            boxes.append(BoxDesc(x, y, (length, width_m, h), round(yaw, 6), 0, carton_rgba()))
+            boxes.append(
+                BoxDesc(x, y, (length, width_m, h), round(yaw, 6), 0, carton_rgba(), tape=taped)
+            )
             if rng.random() < 0.3:
                 small = (
                     _round(length * float(rng.uniform(0.5, 0.8)), 0.001),
@@ -286,7 +289,7 @@ def random_pallet(seed: int, width: int = 640, height: int = 480) -> SceneDesc:
                     _round(tall * 0.6, 0.001),
                 )
                 turn = round(yaw + float(rng.uniform(-10.0, 10.0)), 6)
-                boxes.append(BoxDesc(x, y, small, turn, len(boxes) - 1, carton_rgba()))
+                boxes.append(BoxDesc(x, y, small, turn, len(boxes) - 1, carton_rgba(), tape=taped))
     above = float(rng.uniform(1.6, 2.6))
     tilt = float(rng.uniform(0.0, 25.0))
     pan = float(rng.uniform(-180.0, 180.0))

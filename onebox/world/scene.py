@@ -81,6 +81,11 @@ class SceneSettings:
 
 
 SEED_RED = (0.85, 0.05, 0.05, 1.0)
+TAPE_WIDTH_M = 0.048
+TAPE_THICKNESS_M = 0.0003
+TAPE_FOLD_M = 0.002
+TAPE_RGBA = (0.78, 0.6, 0.4, 1.0)
+"""Brown packing tape, 48 mm (the common roll), a little lighter than a carton."""
 
 
 def seed_scene(settings: SceneSettings = SceneSettings()) -> SceneDesc:
@@ -221,6 +226,20 @@ def build_model(scene: SceneDesc | SceneSettings, base: Path = SCENE_FILE) -> mu
             size=[s / 2 for s in placed.size],
             material=material.name,
         )
+        if box.tape:
+            # Along the length (the body's x), over the line where the flaps meet; seen,
+            # never touched. It stops short of the ends by the edges' dark line: it folds over
+            # the edge there, and the seam between two cartons shows across it.
+            length, _, height = placed.size
+            body.add_geom(
+                name=f"{box_name(i)}_tape",
+                type=mujoco.mjtGeom.mjGEOM_BOX,
+                pos=[0.0, 0.0, height / 2 + TAPE_THICKNESS_M / 2],
+                size=[length / 2 - TAPE_FOLD_M, TAPE_WIDTH_M / 2, TAPE_THICKNESS_M / 2],
+                rgba=list(TAPE_RGBA),
+                contype=0,
+                conaffinity=0,
+            )
     for i, obj in enumerate(desc.objects):
         kind = {
             "cylinder": mujoco.mjtGeom.mjGEOM_CYLINDER,

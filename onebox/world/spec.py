@@ -23,6 +23,7 @@ size = [0.06, 0.06, 0.06]   # length, width, height
 on = 0            # optional: stands on box[0] instead of the table
 rgba = [0.85, 0.05, 0.05, 1.0]
 edges = true      # darker lines along its edges, as the seams of real cartons show
+tape = false      # packing tape 48 mm wide along the middle of its top's longer side
 
 [[object]]        # not boxes: cylinder, sphere, capsule, standing on the table
 shape = "cylinder"
@@ -97,6 +98,8 @@ class BoxDesc:
     on: int | None = None
     rgba: tuple[float, float, float, float] = CARTON_RGBA
     edges: bool = True
+    tape: bool = False
+    """Packing tape along the middle of the top's longer side, where a carton's flaps meet."""
 
 
 @dataclass(frozen=True)
@@ -416,7 +419,7 @@ def check(scene: SceneDesc, where: str = "scene") -> None:
 
 _CAMERA_KEYS = ("x", "y", "z", "tilt_deg", "pan_deg", "width", "height", "hfov_deg")
 _TABLE_KEYS = ("z", "size")
-_BOX_KEYS = ("x", "y", "yaw_deg", "size", "on", "rgba", "edges")
+_BOX_KEYS = ("x", "y", "yaw_deg", "size", "on", "rgba", "edges", "tape")
 _OBJECT_KEYS = ("shape", "x", "y", "size", "rgba")
 _TOP_KEYS = ("description", "camera", "table", "box", "object", "noise")
 
@@ -518,9 +521,10 @@ def _parse(tables: dict[str, Any]) -> SceneDesc:
         on = b.get("on")
         if on is not None and (isinstance(on, bool) or not isinstance(on, int) or not 0 <= on < i):
             raise SceneError(f"{where}.on = {on!r}: the index of a box before it (0 to {i - 1})")
-        edges = b.get("edges", True)
-        if not isinstance(edges, bool):
-            raise SceneError(f"{where}.edges = {edges!r}: expected true or false")
+        edges, tape = b.get("edges", True), b.get("tape", False)
+        for key, flag in (("edges", edges), ("tape", tape)):
+            if not isinstance(flag, bool):
+                raise SceneError(f"{where}.{key} = {flag!r}: expected true or false")
         boxes.append(
             BoxDesc(
                 x=_number(b, "x", where),
@@ -530,6 +534,7 @@ def _parse(tables: dict[str, Any]) -> SceneDesc:
                 on=on,
                 rgba=_rgba(b, where, CARTON_RGBA),
                 edges=edges,
+                tape=tape,
             )
         )
     objects = []
@@ -606,6 +611,8 @@ def dumps(scene: SceneDesc) -> str:
         lines.append(f"rgba = {_value(box.rgba)}")
         if not box.edges:
             lines.append("edges = false")
+        if box.tape:
+            lines.append("tape = true")
     for obj in scene.objects:
         lines += ["", "[[object]]", f"shape = {_value(obj.shape)}"]
         lines += [f"x = {_value(obj.x)}", f"y = {_value(obj.y)}", f"size = {_value(obj.size)}"]
