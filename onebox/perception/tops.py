@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -338,7 +339,12 @@ def plateaus(
         if not cells:
             break
         level, tol, tops_n = _split_tops(top_flat, tops, cells, level, tol, h_flat, p_idx, p_top)
-    groups = [] if colour_cut is None else _one_carton(plateaus, top_lab, lens, support, tops.shift)
+    groups = []
+    if colour_cut is not None and grey is not None:
+        across, down = lens.rays(cols_n, rows_n)
+        basis = plane_basis(support, None)
+        shades = _Shades(tops, d_flat, grey.reshape(-1), across, down, basis)
+        groups = _one_carton(plateaus, top_lab, lens, support, shades, settings.colour_step)
     if groups:
         level, tol, tops_n = _merge_tops(top_flat, groups, level, tol, h_flat, p_idx, p_top)
         tops = _Tops.gather(top_lab, tops_n, PAD, (r0, c0))
@@ -358,6 +364,9 @@ def plateaus(
             settings,
             depth.shape,
         )
+    if colour_cut is not None:
+        for strip in _print_strips(plateaus):
+            strip.is_box = False
     labels_top[crop] = top_lab[PAD:-PAD, PAD:-PAD]
     return plateaus, height, labels_top
 
@@ -1053,6 +1062,62 @@ def _split_tops(
     return level, tol, count
 
 
+TAPE_WIDTHS_M = (0.03, 0.08)
+"""Packing tape is 48 or 72 mm wide (narrower on small cartons)."""
+
+
+@dataclass
+class _Shades:
+    """The tops' pixels' places on the support plane and their brightness, on demand."""
+
+    tops: _Tops
+    d_flat: Float32Array
+    grey_flat: npt.NDArray[np.int16]
+    across: Float64Array
+    """Each picture column's ray's x (and ``down``, each row's y), at depth 1."""
+    down: Float64Array
+    basis: Float64Array
+
+    def tape_edge(self, wide: Plateau, narrow: Plateau, colour_step: float) -> bool:
+        """Whether ``wide`` is a flap and the tape beside it, ``narrow`` the other flap (colour
+        cut the tape's far edge only; its near one is a soft step, two small ones): along
+        the side that meets ``narrow``, a band as wide as the tape (the wide one's width less
+        the narrow one's) of another shade than the rest, and the rest of ``narrow``'s."""
+        assert wide.rect is not None and narrow.rect is not None
+        tape = wide.rect.width_m - narrow.rect.width_m
+        if not TAPE_WIDTHS_M[0] <= tape <= TAPE_WIDTHS_M[1]:
+            return False
+        ax = np.asarray(wide.rect.axis)
+        perp = np.array([-ax[1], ax[0]])
+        if (np.asarray(narrow.rect.middle) - np.asarray(wide.rect.middle)) @ perp < 0:
+            perp = -perp
+        a, b, g = self._pixels(wide.label)
+        out = (a - wide.rect.middle[0]) * perp[0] + (b - wide.rect.middle[1]) * perp[1]
+        edge = wide.rect.width_m / 2 - tape
+        margin = max(0.005, 2.0 * wide.footprint_m)
+        band, rest = g[out > edge + margin], g[out < edge - margin]
+        other = self._pixels(narrow.label)[2]
+        if len(band) < 6 or len(rest) < 6 or len(other) < 6:
+            return False
+        shade_band, shade_rest = float(np.median(band)), float(np.median(rest))
+        return (
+            abs(shade_band - shade_rest) >= colour_step / 2
+            and abs(shade_rest - float(np.median(other))) < colour_step / 2
+        )
+
+    def _pixels(self, label: int) -> tuple[Float64Array, Float64Array, npt.NDArray[np.int16]]:
+        tops = self.tops
+        part = slice(int(tops.starts[label]), int(tops.starts[label] + tops.counts[label]))
+        flat = tops.flat[part]
+        a, b = _in_plane(
+            self.basis,
+            self.across[tops.cols[part]],
+            self.down[tops.rows[part]],
+            self.d_flat[flat],
+        )
+        return a, b, self.grey_flat[flat]
+
+
 PARALLEL_SIN = math.sin(math.radians(4.0))
 """Two pieces of one carton's top lie parallel within this angle (4 degrees)."""
 
@@ -1062,15 +1127,18 @@ def _one_carton(
     top_lab: npt.NDArray[np.int32],
     lens: Intrinsics,
     support: Support,
-    shift: tuple[int, int],
+    shades: _Shades,
+    colour_step: float,
 ) -> list[list[int]]:
     """Pieces of one carton's top that its own print cut apart by colour, as groups of top
     labels to join: a label or a print (a piece at the top's level with the top all round
     it), and a taped carton's flaps and tape (pieces side by side along their length, of one
     length, their widths symmetric about the middle line of the whole, which runs along its
     length: a carton's flaps meet on the middle line along its length, and the tape covers
-    it). Touching cartons of one height stay apart: a row end to end meets across its length,
-    and two side by side make one top only if each is under half as wide as long."""
+    it; or two pieces, one a flap and the other the tape and a flap of the first one's shade,
+    where colour cut only one of the tape's edges). Touching cartons of one height stay apart:
+    a row end to end meets across its length, and two side by side make one top only if each
+    is under half as wide as long and they are of one width."""
     placed = [p for p in plateaus if p.rect is not None]
     joined = {p.label: p.label for p in placed}
 
@@ -1092,7 +1160,7 @@ def _one_carton(
                 and _rect_area(outer) > _rect_area(inner)
                 and level_with(outer, inner)
                 and _within(inner, outer)
-                and _surrounded(inner, outer, top_lab, lens, support, cam, shift)
+                and _surrounded(inner, outer, top_lab, lens, support, cam, shades.tops.shift)
             ):
                 joined[inner.label] = outer.label
                 break
@@ -1115,7 +1183,8 @@ def _one_carton(
     for row in rows.values():
         if len(row) < 2:
             continue
-        for group in _flaps_and_tape([by_label[t] for t in row]):
+        pieces = [by_label[t] for t in row]
+        for group in _flaps_and_tape(pieces, lambda w, n: shades.tape_edge(w, n, colour_step)):
             for t in group[1:]:
                 joined[t] = group[0]
     groups: dict[int, list[int]] = {}
@@ -1225,10 +1294,14 @@ def _side_by_side(a: Plateau, b: Plateau) -> bool:
     return -0.01 < gap < max(0.015, 4.0 * max(a.footprint_m, b.footprint_m))
 
 
-def _flaps_and_tape(row: list[Plateau]) -> list[list[int]]:
-    """A row of pieces side by side (:func:`_side_by_side`), split into cartons from one end:
-    the most pieces (up to four) whose widths mirror about their middle, the inner ones
-    narrower than the outer (the tape, or its halves), no wider together than long."""
+def _flaps_and_tape(
+    row: list[Plateau], tape_edge: Callable[[Plateau, Plateau], bool]
+) -> list[list[int]]:
+    """A row of pieces side by side (:func:`_side_by_side`), split into cartons' tops: up to
+    four pieces, no wider together than long, whose widths mirror about their middle, the
+    inner ones no wider together than tape (flaps and the tape, or its halves); or two that
+    mirror, or that ``tape_edge`` (wider, narrower) says are a flap and a flap with the
+    tape."""
     assert row[0].rect is not None
     ax = np.asarray(row[0].rect.axis)
     perp = np.array([-ax[1], ax[0]])
@@ -1236,25 +1309,112 @@ def _flaps_and_tape(row: list[Plateau]) -> list[list[int]]:
     across = [float(np.asarray(p.rect.middle) @ perp) for p in row if p.rect is not None]
     widths = [p.rect.width_m for p in row if p.rect is not None]
     lengths = [p.rect.length_m for p in row if p.rect is not None]
+
+    def group_score(start: int, end: int) -> int:
+        """3 for flaps and tape, 1 for two halves (or a flap and a flap with the tape), 0 for
+        no carton's top."""
+        size = end - start
+        w = widths[start:end]
+        whole = across[end - 1] + w[-1] / 2 - (across[start] - w[0] / 2)
+        if whole > 1.05 * max(lengths[start:end]):
+            return 0
+        slack = max(0.012, 0.12 * whole)
+        mirrored = all(abs(w[k] - w[-1 - k]) < slack for k in range(size // 2))
+        if size == 2:
+            wide, narrow = sorted(row[start:end], key=lambda p: -(p.rect.width_m if p.rect else 0))
+            return 1 if mirrored or tape_edge(wide, narrow) else 0
+        # The inner pieces are the tape (or its halves, with the flaps' line between).
+        return 3 if mirrored and whole - w[0] - w[-1] <= TAPE_WIDTHS_M[1] + 0.01 else 0
+
+    # The partition of the row that finds the most (flaps and tape first): a row that starts
+    # with another carton's flap pairs no flap with its neighbour's.
+    best = [0] * (len(row) + 1)
+    cut: list[int] = [0] * (len(row) + 1)
+    for end in range(1, len(row) + 1):
+        best[end], cut[end] = best[end - 1], end - 1
+        for size in (2, 3, 4):
+            start = end - size
+            if start >= 0:
+                score = group_score(start, end)
+                if score and best[start] + score > best[end]:
+                    best[end], cut[end] = best[start] + score, start
     groups = []
-    start = 0
-    while start < len(row) - 1:
-        for size in (4, 3, 2):
-            end = start + size
-            if end > len(row):
-                continue
-            w = widths[start:end]
-            whole = across[end - 1] + w[-1] / 2 - (across[start] - w[0] / 2)
-            slack = max(0.012, 0.12 * whole)
-            mirrored = all(abs(w[k] - w[-1 - k]) < slack for k in range(size // 2))
-            inner_narrower = size == 2 or max(w[1:-1]) < 0.8 * min(w[0], w[-1])
-            if mirrored and inner_narrower and whole <= 1.05 * max(lengths[start:end]):
-                groups.append([p.label for p in row[start:end]])
-                start = end
-                break
-        else:
-            start += 1
+    end = len(row)
+    while end > 0:
+        start = cut[end]
+        if end - start > 1:
+            groups.append([p.label for p in row[start:end]])
+        end = start
     return groups
+
+
+PRINT_STRIP_M = 0.08
+"""The widest strip of print (packing tape is 48 or 72 mm) taken for part of a top."""
+
+
+def _print_strips(plateaus: list[Plateau]) -> list[Plateau]:
+    """Boxes' tops with a top at their level touching two opposite sides, across which they
+    span no more than ``PRINT_STRIP_M``: a strip or a patch of tape or print that colour cut
+    out of a top and that could not be joined back (the tape of a carton that a box on it
+    hides in part), not a box. A narrow carton packed between two of its height is one too,
+    and is lost."""
+    tops = [p for p in plateaus if p.rect is not None]
+    strips = []
+    for strip in tops:
+        rect = strip.rect
+        if not strip.is_box or rect is None or rect.width_m > PRINT_STRIP_M:
+            continue
+        ax = np.asarray(rect.axis)
+        perp = np.array([-ax[1], ax[0]])
+        level = [
+            other
+            for other in tops
+            if other is not strip
+            and abs(other.height_m - strip.height_m)
+            < max(math.hypot(other.tolerance_m, strip.tolerance_m), FLAT_REACH_M)
+        ]
+        for out, side, span, extent in (
+            (perp, ax, rect.width_m, rect.length_m),
+            (ax, perp, rect.length_m, rect.width_m),
+        ):
+            if span <= PRINT_STRIP_M and len(_touching(strip, level, out, side, extent)) == 2:
+                strips.append(strip)
+                break
+    return strips
+
+
+def _touching(
+    strip: Plateau, others: list[Plateau], out: Float64Array, side: Float64Array, extent: float
+) -> set[int]:
+    """Which ends of ``out`` (+1, -1) tops of ``others`` touch along most of the strip's
+    side there (``extent`` long, along ``side``)."""
+    assert strip.rect is not None
+    rect = strip.rect
+    span = (
+        abs(float(out @ np.asarray(rect.axis))) * rect.length_m
+        + abs(float(out @ np.array([-rect.axis[1], rect.axis[0]]))) * rect.width_m
+    )
+    ends = set()
+    for other in others:
+        o = other.rect
+        assert o is not None
+        offset = np.asarray(o.middle) - np.asarray(rect.middle)
+        o_ax = np.asarray(o.axis)
+        o_perp = np.array([-o_ax[1], o_ax[0]])
+        # The other's half extents out from the strip's side and along it.
+        half_out = o.length_m / 2 * abs(float(out @ o_ax)) + o.width_m / 2 * abs(
+            float(out @ o_perp)
+        )
+        half_side = o.length_m / 2 * abs(float(side @ o_ax)) + o.width_m / 2 * abs(
+            float(side @ o_perp)
+        )
+        away = float(offset @ out)
+        gap = abs(away) - half_out - span / 2
+        along = float(offset @ side)
+        overlap = min(extent / 2, along + half_side) - max(-extent / 2, along - half_side)
+        if -0.01 < gap < max(0.015, 4.0 * strip.footprint_m) and overlap > 0.5 * extent:
+            ends.add(1 if away > 0 else -1)
+    return ends
 
 
 def _merge_tops(
