@@ -254,7 +254,7 @@ def extent_unknown(box: Plateau) -> bool:
     if band <= max(3.0 * box.footprint_m, HIDDEN_BAND_M):
         return False
     for n0, n1 in rect.hidden_normals:
-        seen = _half_extent(rect, n0, n1) * 2.0
+        seen = rect.half_extent(n0, n1) * 2.0
         if band > HIDDEN_SHARE * seen:
             return True
     return False
@@ -301,7 +301,7 @@ def _reaches_under(
         if rx * o0 + ry * o1 < half_out - slack:
             continue
         # The upper's half extent along the side, which must lie within the side's span.
-        reach = _half_extent(upper.rect, -o1, o0)
+        reach = upper.rect.half_extent(-o1, o0)
         room = half_side + max(slack, 0.1 * reach)
         offset = abs(ry * o0 - rx * o1)
         if rows and lower.is_box and _next_in_row(lower, upper, (o0, o1), slack):
@@ -312,7 +312,7 @@ def _reaches_under(
                 half_side <= reach + max(slack, 0.1 * reach)
                 # ... and the strip is narrower than the box across it (the next carton of
                 # a row of the same depth is a whole top of its own).
-                and half_out < 0.6 * _half_extent(upper.rect, o0, o1)
+                and half_out < 0.6 * upper.rect.half_extent(o0, o1)
             )
         ):
             return True
@@ -337,22 +337,14 @@ def _next_in_row(lower: Plateau, upper: Plateau, side: tuple[float, float], slac
         if abs(o0 * ax0 + o1 * ax1) > 0.7
         else (rect.width_m / 2, rect.length_m / 2)
     )
-    reach = _half_extent(upper.rect, -o1, o0)
+    reach = upper.rect.half_extent(-o1, o0)
     fit = max(slack, 0.1 * reach)
     return (
         rx * o0 + ry * o1 >= half_out - slack
         and upper.height_m - lower.height_m < SLAB * upper.rect.width_m
         and abs(ry * o0 - rx * o1) <= fit
         and abs(reach - half_side) <= fit
-        and half_out >= 0.6 * _half_extent(upper.rect, o0, o1)
-    )
-
-
-def _half_extent(rect: Rectangle, d0: float, d1: float) -> float:
-    """Half a rectangle's extent along the unit direction (d0, d1)."""
-    a0, a1 = rect.axis
-    return 0.5 * (
-        abs(rect.length_m * (a0 * d0 + a1 * d1)) + abs(rect.width_m * (a1 * d0 - a0 * d1))
+        and half_out >= 0.6 * upper.rect.half_extent(o0, o1)
     )
 
 
@@ -848,8 +840,7 @@ def _beside(lower: Plateau, upper: Plateau, sides: tuple[tuple[float, float], ..
         return False
     rel = lower.rect.corners - np.asarray(upper.rect.middle)
     return any(
-        float(np.max(rel @ np.array(o))) - _half_extent(upper.rect, *o) > SEAM_REACH_M
-        for o in sides
+        float(np.max(rel @ np.array(o))) - upper.rect.half_extent(*o) > SEAM_REACH_M for o in sides
     )
 
 
@@ -940,7 +931,7 @@ def _past_hidden_side(lower: Plateau, upper: Plateau) -> bool:
     rect = lower.rect
     rx = upper.rect.middle[0] - rect.middle[0]
     ry = upper.rect.middle[1] - rect.middle[1]
-    return any(rx * o0 + ry * o1 > _half_extent(rect, o0, o1) for o0, o1 in rect.hidden_normals)
+    return any(rx * o0 + ry * o1 > rect.half_extent(o0, o1) for o0, o1 in rect.hidden_normals)
 
 
 def _base_rank(level: Plateau | None, box: Plateau, matches: int) -> tuple[bool, bool, int]:

@@ -48,6 +48,13 @@ class Rectangle:
     """Outward unit normals of the sides with no readings past many of their pixels (an
     edge's dropout, which may eat a pixel or two of the top)."""
 
+    def half_extent(self, d0: float, d1: float) -> float:
+        """Half the rectangle's extent along the unit direction (d0, d1)."""
+        a0, a1 = self.axis
+        return 0.5 * (
+            abs(self.length_m * (a0 * d0 + a1 * d1)) + abs(self.width_m * (a1 * d0 - a0 * d1))
+        )
+
     @property
     def corners(self) -> Float64Array:
         ax = np.asarray(self.axis)

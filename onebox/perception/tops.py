@@ -1204,14 +1204,9 @@ def _within(inner: Plateau, outer: Plateau) -> bool:
     cos, sin = b.axis
     mx, my = a.middle[0] - b.middle[0], a.middle[1] - b.middle[1]
     along, across = mx * cos + my * sin, my * cos - mx * sin
-    # The inner's half extents along the outer's axes.
-    c = abs(a.axis[0] * cos + a.axis[1] * sin)
-    s_ = math.sqrt(max(0.0, 1.0 - c * c))
-    half_along = (a.length_m * c + a.width_m * s_) / 2
-    half_across = (a.length_m * s_ + a.width_m * c) / 2
     return (
-        abs(along) + half_along <= b.length_m / 2 + 0.02
-        and abs(across) + half_across <= b.width_m / 2 + 0.02
+        abs(along) + a.half_extent(cos, sin) <= b.length_m / 2 + 0.02
+        and abs(across) + a.half_extent(-sin, cos) <= b.width_m / 2 + 0.02
     )
 
 
@@ -1268,12 +1263,7 @@ def _surrounded(
     normal = (ax, -ax, perp, -perp)[k]
     own = float(np.asarray(rect.middle) @ normal) + (rect.length_m if k < 2 else rect.width_m) / 2
     o = outer.rect
-    o_ax = np.asarray(o.axis)
-    reach = (
-        float(np.asarray(o.middle) @ normal)
-        + o.length_m / 2 * abs(float(normal @ o_ax))
-        + o.width_m / 2 * abs(float(normal @ np.array([-o_ax[1], o_ax[0]])))
-    )
+    reach = float(np.asarray(o.middle) @ normal) + o.half_extent(*normal)
     return abs(reach - own) < max(0.015, 3.0 * outer.footprint_m)
 
 
@@ -1390,24 +1380,13 @@ def _touching(
     side there (``extent`` long, along ``side``)."""
     assert strip.rect is not None
     rect = strip.rect
-    span = (
-        abs(float(out @ np.asarray(rect.axis))) * rect.length_m
-        + abs(float(out @ np.array([-rect.axis[1], rect.axis[0]]))) * rect.width_m
-    )
+    span = 2.0 * rect.half_extent(*out)
     ends = set()
     for other in others:
         o = other.rect
         assert o is not None
         offset = np.asarray(o.middle) - np.asarray(rect.middle)
-        o_ax = np.asarray(o.axis)
-        o_perp = np.array([-o_ax[1], o_ax[0]])
-        # The other's half extents out from the strip's side and along it.
-        half_out = o.length_m / 2 * abs(float(out @ o_ax)) + o.width_m / 2 * abs(
-            float(out @ o_perp)
-        )
-        half_side = o.length_m / 2 * abs(float(side @ o_ax)) + o.width_m / 2 * abs(
-            float(side @ o_perp)
-        )
+        half_out, half_side = o.half_extent(*out), o.half_extent(*side)
         away = float(offset @ out)
         gap = abs(away) - half_out - span / 2
         along = float(offset @ side)
