@@ -303,11 +303,10 @@ def plateaus(
             own_level = np.where(alone & ~ring, level, np.nan)
             rest = candidates[top_flat[candidates] == 0]
             _grow(top_flat, rest, h_flat, own_level, below, width_p, None, reach)
-    # Measured, then looked over for seams between cartons of one shade (colour only), split
-    # and measured again.
-    for look in range(SEAM_ROUNDS + 1):
-        tops = _Tops.gather(top_lab, tops_n, PAD, (r0, c0))
-        plateaus = _measure_all(
+
+    def measured(count: int) -> tuple[_Tops, list[Plateau]]:
+        tops = _Tops.gather(top_lab, count, PAD, (r0, c0))
+        return tops, _measure_all(
             tops,
             top_flat,
             h_flat,
@@ -323,6 +322,11 @@ def plateaus(
             settings,
             depth.shape,
         )
+
+    # Measured, then looked over for seams between cartons of one shade (colour only), split
+    # and measured again; then the pieces of one carton's top joined, and measured again.
+    for look in range(SEAM_ROUNDS + 1):
+        tops, plateaus = measured(tops_n)
         if look == SEAM_ROUNDS or colour_cut is None or grey is None:
             break
         cells = _seams(
@@ -339,31 +343,13 @@ def plateaus(
         if not cells:
             break
         level, tol, tops_n = _split_tops(top_flat, tops, cells, level, tol, h_flat, p_idx, p_top)
-    groups = []
     if colour_cut is not None and grey is not None:
         across, down = lens.rays(cols_n, rows_n)
-        basis = plane_basis(support, None)
-        shades = _Shades(tops, d_flat, grey.reshape(-1), across, down, basis)
+        shades = _Shades(tops, d_flat, grey.reshape(-1), across, down, plane_basis(support, None))
         groups = _one_carton(plateaus, top_lab, lens, support, shades, settings.colour_step)
-    if groups:
-        level, tol, tops_n = _merge_tops(top_flat, groups, level, tol, h_flat, p_idx, p_top)
-        tops = _Tops.gather(top_lab, tops_n, PAD, (r0, c0))
-        plateaus = _measure_all(
-            tops,
-            top_flat,
-            h_flat,
-            d_flat,
-            s_flat,
-            level,
-            tol,
-            p_idx,
-            p_top,
-            p_h,
-            lens,
-            support,
-            settings,
-            depth.shape,
-        )
+        if groups:
+            level, tol, tops_n = _merge_tops(top_flat, groups, level, tol, h_flat, p_idx, p_top)
+            tops, plateaus = measured(tops_n)
     if colour_cut is not None:
         for strip in _print_strips(plateaus):
             strip.is_box = False
