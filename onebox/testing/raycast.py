@@ -14,7 +14,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -244,7 +244,7 @@ def taped(
         marks.append(
             Mark(span, across, mark_colour) if along_x else Mark(across, span, mark_colour)
         )
-    return replace(box, marks=(*box.marks, *marks))
+    return dataclasses.replace(box, marks=(*box.marks, *marks))
 
 
 @dataclass(frozen=True)
@@ -400,6 +400,7 @@ def render(scene: Scene) -> tuple[Float32Array, npt.NDArray[np.uint8]]:
         normal[hit] = n
         base[hit] = scene.plane.colour
     for shape_ in scene.shapes:
+        paint = np.broadcast_to(np.asarray(shape_.colour, dtype=np.float64), (*shape, 3))
         if isinstance(shape_, Box):
             t, nrm, local = _hit_box(origin, dirs, shape_)
             half = np.asarray(shape_.size) / 2
@@ -419,7 +420,6 @@ def render(scene: Scene) -> tuple[Float32Array, npt.NDArray[np.uint8]]:
             dark = np.where(
                 on_top & (rim < scene.seam_m), 1.0 - (1.0 - scene.seam_shade) * (1.0 - fade), 1.0
             )
-            paint = np.broadcast_to(np.asarray(shape_.colour, dtype=np.float64), (*shape, 3))
             if shape_.marks:
                 paint = paint.copy()
                 for mark in shape_.marks:
@@ -433,11 +433,9 @@ def render(scene: Scene) -> tuple[Float32Array, npt.NDArray[np.uint8]]:
         elif isinstance(shape_, Cylinder):
             t, nrm = _hit_cylinder(origin, dirs, shape_)
             dark = np.ones(shape)
-            paint = np.broadcast_to(np.asarray(shape_.colour, dtype=np.float64), (*shape, 3))
         else:
             t, nrm = _hit_sphere(origin, dirs, shape_)
             dark = np.ones(shape)
-            paint = np.broadcast_to(np.asarray(shape_.colour, dtype=np.float64), (*shape, 3))
         hit = t < depth
         depth[hit] = t[hit]
         normal[hit] = nrm[hit]
