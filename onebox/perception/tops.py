@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -345,9 +344,13 @@ def plateaus(
         level, tol, tops_n = _split_tops(top_flat, tops, cells, level, tol, h_flat, p_idx, p_top)
     if colour_cut is not None and grey is not None:
         across, down = lens.rays(cols_n, rows_n)
-        shades = _Shades(tops, d_flat, grey.reshape(-1), across, down, plane_basis(support, None))
-        groups = _one_carton(plateaus, top_lab, lens, support, shades, settings.colour_step)
-        if groups:
+        basis = plane_basis(support, None)
+        # Twice: a label across the tape lies inside the flaps and tape joined.
+        for _ in range(2):
+            shades = _Shades(tops, d_flat, grey.reshape(-1), across, down, basis)
+            groups = _one_carton(plateaus, top_lab, lens, support, shades, settings.colour_step)
+            if not groups:
+                break
             level, tol, tops_n = _merge_tops(top_flat, groups, level, tol, h_flat, p_idx, p_top)
             tops, plateaus = measured(tops_n)
     if colour_cut is not None:
@@ -1091,6 +1094,20 @@ class _Shades:
             and abs(shade_rest - float(np.median(other))) < colour_step / 2
         )
 
+    def banded(self, a: Plateau, band: Plateau, b: Plateau, colour_step: float) -> bool:
+        """Whether ``band`` (between ``a`` and ``b``) is print across one top: ``a`` and
+        ``b`` of one shade, ``band`` of another."""
+        shade_a, shade_band, shade_b = (self._shade(p.label) for p in (a, band, b))
+        return (
+            abs(shade_a - shade_b) < colour_step / 2
+            and abs(shade_band - (shade_a + shade_b) / 2) >= colour_step / 2
+        )
+
+    def _shade(self, label: int) -> float:
+        tops = self.tops
+        part = slice(int(tops.starts[label]), int(tops.starts[label] + tops.counts[label]))
+        return float(np.median(self.grey_flat[tops.flat[part]]))
+
     def _pixels(self, label: int) -> tuple[Float64Array, Float64Array, npt.NDArray[np.int16]]:
         tops = self.tops
         part = slice(int(tops.starts[label]), int(tops.starts[label] + tops.counts[label]))
@@ -1170,7 +1187,7 @@ def _one_carton(
         if len(row) < 2:
             continue
         pieces = [by_label[t] for t in row]
-        for group in _flaps_and_tape(pieces, lambda w, n: shades.tape_edge(w, n, colour_step)):
+        for group in _flaps_and_tape(pieces, shades, colour_step):
             for t in group[1:]:
                 joined[t] = group[0]
     groups: dict[int, list[int]] = {}
@@ -1270,14 +1287,13 @@ def _side_by_side(a: Plateau, b: Plateau) -> bool:
     return -0.01 < gap < max(0.015, 4.0 * max(a.footprint_m, b.footprint_m))
 
 
-def _flaps_and_tape(
-    row: list[Plateau], tape_edge: Callable[[Plateau, Plateau], bool]
-) -> list[list[int]]:
+def _flaps_and_tape(row: list[Plateau], shades: _Shades, colour_step: float) -> list[list[int]]:
     """A row of pieces side by side (:func:`_side_by_side`), split into cartons' tops: up to
     four pieces, no wider together than long, whose widths mirror about their middle, the
-    inner ones no wider together than tape (flaps and the tape, or its halves); or two that
-    mirror, or that ``tape_edge`` (wider, narrower) says are a flap and a flap with the
-    tape."""
+    inner ones no wider together than tape (flaps and the tape, or its halves); two that
+    mirror, or that :meth:`_Shades.tape_edge` says are a flap and a flap with the tape; or
+    three, the middle one a strip of print between two of one shade (a band printed across
+    a carton, a strap), no wider together than twice their length."""
     assert row[0].rect is not None
     ax = np.asarray(row[0].rect.axis)
     perp = np.array([-ax[1], ax[0]])
@@ -1292,13 +1308,21 @@ def _flaps_and_tape(
         size = end - start
         w = widths[start:end]
         whole = across[end - 1] + w[-1] / 2 - (across[start] - w[0] / 2)
-        if whole > 1.05 * max(lengths[start:end]):
+        length = max(lengths[start:end])
+        if (
+            size == 3
+            and w[1] <= PRINT_STRIP_M
+            and whole <= 2.0 * length
+            and shades.banded(row[start], row[start + 1], row[start + 2], colour_step)
+        ):
+            return 3
+        if whole > 1.05 * length:
             return 0
         slack = max(0.012, 0.12 * whole)
         mirrored = all(abs(w[k] - w[-1 - k]) < slack for k in range(size // 2))
         if size == 2:
             wide, narrow = sorted(row[start:end], key=lambda p: -(p.rect.width_m if p.rect else 0))
-            return 1 if mirrored or tape_edge(wide, narrow) else 0
+            return 1 if mirrored or shades.tape_edge(wide, narrow, colour_step) else 0
         # The inner pieces are the tape (or its halves, with the flaps' line between).
         return 3 if mirrored and whole - w[0] - w[-1] <= TAPE_WIDTHS_M[1] + 0.01 else 0
 
