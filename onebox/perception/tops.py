@@ -1273,17 +1273,17 @@ def _surrounded(
 def _side_by_side(a: Plateau, b: Plateau) -> bool:
     """Two tops lying parallel, of one length, ends level, their long sides touching."""
     assert a.rect is not None and b.rect is not None
-    ax, bx = np.asarray(a.rect.axis), np.asarray(b.rect.axis)
-    if abs(ax[0] * bx[1] - ax[1] * bx[0]) > PARALLEL_SIN:
+    (a0, a1), (b0, b1) = a.rect.axis, b.rect.axis
+    if abs(a0 * b1 - a1 * b0) > PARALLEL_SIN:
         return False
     length = max(a.rect.length_m, b.rect.length_m)
     slack = max(0.012, 0.05 * length)
     if abs(a.rect.length_m - b.rect.length_m) > slack:
         return False
-    offset = np.asarray(b.rect.middle) - np.asarray(a.rect.middle)
-    if abs(offset @ ax) > slack:
+    dx, dy = b.rect.middle[0] - a.rect.middle[0], b.rect.middle[1] - a.rect.middle[1]
+    if abs(dx * a0 + dy * a1) > slack:
         return False
-    gap = abs(float(offset @ np.array([-ax[1], ax[0]]))) - (a.rect.width_m + b.rect.width_m) / 2
+    gap = abs(dy * a0 - dx * a1) - (a.rect.width_m + b.rect.width_m) / 2
     return -0.01 < gap < max(0.015, 4.0 * max(a.footprint_m, b.footprint_m))
 
 
