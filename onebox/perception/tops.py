@@ -1085,13 +1085,12 @@ class _Shades:
         edge = wide.rect.width_m / 2 - tape
         margin = max(0.005, 2.0 * wide.footprint_m)
         band, rest = g[out > edge + margin], g[out < edge - margin]
-        other = self._pixels(narrow.label)[2]
-        if len(band) < 6 or len(rest) < 6 or len(other) < 6:
+        if len(band) < 6 or len(rest) < 6:
             return False
         shade_band, shade_rest = float(np.median(band)), float(np.median(rest))
         return (
             abs(shade_band - shade_rest) >= colour_step / 2
-            and abs(shade_rest - float(np.median(other))) < colour_step / 2
+            and abs(shade_rest - self._shade(narrow.label)) < colour_step / 2
         )
 
     def banded(self, a: Plateau, band: Plateau, b: Plateau, colour_step: float) -> bool:
