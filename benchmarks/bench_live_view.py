@@ -56,6 +56,7 @@ import bisect
 import json
 import os
 import re
+import shutil
 import socket
 import subprocess
 import sys
@@ -298,6 +299,20 @@ def median(values: list[float]) -> float:
     return float(np.median(values)) if values else float("nan")
 
 
+def missing_browser(node_modules: Path) -> str | None:
+    """What the browser's side lacks, in one line (with how to get it), or None."""
+    if shutil.which("node") is None:
+        return "no node on PATH (apt-get install -y nodejs)"
+    if not Path("/usr/bin/chromium").exists():
+        return "no /usr/bin/chromium (apt-get install -y chromium)"
+    if not (node_modules / "playwright-core").is_dir():
+        return (
+            f"no playwright-core in {node_modules} "
+            f"(npm install playwright-core in {node_modules.parent}, or --node-modules DIR)"
+        )
+    return None
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__.splitlines()[0], formatter_class=argparse.RawDescriptionHelpFormatter
@@ -313,6 +328,9 @@ def main() -> None:
     )
     parser.add_argument("--label", default="", help="a name for this run in the summary")
     args = parser.parse_args()
+    missing = missing_browser(args.node_modules)
+    if missing is not None:
+        raise SystemExit(f"bench_live_view: {missing}")
     args.shots.mkdir(parents=True, exist_ok=True)
     for old in args.shots.glob("page_*.png"):
         old.unlink()
