@@ -465,8 +465,9 @@ def find_bases(
     foot_lowers[pair_l, pair_b] = (lower & (first[..., 0] == 0)).sum(axis=1)
     # A level counts when it is seen on at least two probes and hardly anything lower is, or
     # on two opposite sides (a box across a narrower one: past its other sides lies lower).
-    side_match = match.reshape(len(pair_l), 4, -1).sum(axis=2)
-    side_lower = lower.reshape(len(pair_l), 4, -1).sum(axis=2)
+    probes = match.shape[1] // 4  # (no pair at all: -1 cannot be inferred from size 0)
+    side_match = match.reshape(len(pair_l), 4, probes).sum(axis=2)
+    side_lower = lower.reshape(len(pair_l), 4, probes).sum(axis=2)
     per_side = side_match >= 2
     across[pair_l, pair_b] = (per_side[:, 0] & per_side[:, 1]) | (per_side[:, 2] & per_side[:, 3])
     # ... or, a level that is no whole box's top, on two sides or more, more often than
