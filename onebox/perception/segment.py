@@ -33,6 +33,32 @@ STEP_FLOOR_M = 0.003
 """The smallest height step between neighbours that separates two objects."""
 
 
+MEDIAN_NETWORK = (
+    (1, 2), (4, 5), (7, 8), (0, 1), (3, 4), (6, 7), (1, 2), (4, 5), (7, 8),
+    (0, 3), (5, 8), (4, 7), (3, 6), (1, 4), (2, 5), (4, 7), (4, 2), (6, 4), (4, 2),
+)  # fmt: skip
+"""Compare-exchanges that leave the median of nine values in the fifth (Paeth's network)."""
+
+
+def median3(depth_m: Float32Array) -> Float32Array:
+    """The depth picture's 3 x 3 median, NaN where there is no reading: a pixel with no reading
+    keeps none, and one with five or more of its nine without a reading has none. A median keeps
+    a straight edge where it is and a step's height, while it cuts independent noise about
+    2.4-fold."""
+    rows, cols = depth_m.shape
+    with np.errstate(invalid="ignore"):
+        missing = ~((depth_m > 0) & (depth_m < np.inf))
+    padded = np.pad(np.where(missing, np.float32(np.inf), depth_m), 1, mode="edge")
+    v = [padded[i : i + rows, j : j + cols].copy() for i in range(3) for j in range(3)]
+    for a, b in MEDIAN_NETWORK:
+        low = np.minimum(v[a], v[b])
+        np.maximum(v[a], v[b], out=v[b])
+        v[a] = low
+    result = v[4]
+    result[missing | np.isinf(result)] = np.nan
+    return result
+
+
 def breaks(height_m: Float32Array, step_m: Float32Array | np.float32) -> BoolArray:
     """Pixels that are the lower side of a height step larger than ``step_m`` (one figure, or
     one per pixel) to a neighbour."""

@@ -278,6 +278,20 @@ def fit_support(
     return support_from_plane(normal, offset, camera_to_world, share, sigma, distance)
 
 
+def noise_against(depth_m: Float32Array, lens: Intrinsics, support: Support) -> float:
+    """The depth noise of a picture at ``support.distance_m``, measured against a plane known
+    to fit it (the readings within 3 sigma(z) of it, on the grid sample): how much a filter
+    cut the noise the support was fitted under."""
+    points, _ = _sample(depth_m, lens)
+    d = points[:, 2]
+    residual = points @ np.asarray(support.normal_camera) + support.offset_camera_m
+    near = np.abs(residual) < np.maximum(3.0 * support.sigma_at(d), 3.0 * SIGMA_FLOOR_M)
+    if near.sum() < 30:
+        return support.sigma_m
+    scaled = residual[near] / (d[near] / support.distance_m) ** 2
+    return max(1.4826 * float(np.median(np.abs(scaled - np.median(scaled)))), SIGMA_FLOOR_M)
+
+
 def support_holds(
     depth_m: Float32Array, lens: Intrinsics, support: Support, min_share_ratio: float = 0.6
 ) -> bool:
