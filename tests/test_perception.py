@@ -7,12 +7,13 @@ import math
 
 import numpy as np
 import pytest
+from scipy import ndimage
 
 from onebox.geometry import Intrinsics
 from onebox.perception.boxes import BoxFinder, FinderSettings, find_boxes
 from onebox.perception.segment import median3
 from onebox.perception.support import Support, fit_support
-from onebox.perception.tops import _bands
+from onebox.perception.tops import _bands, _extents
 from onebox.testing.judged import yaw_error
 from onebox.testing.raycast import (
     Box,
@@ -478,8 +479,6 @@ def test_boxes_through_d435_noise_at_2_3_m(seed):
 def test_the_depth_median_keeps_holes_and_edges():
     """The 3 x 3 median is scipy's inside the picture; a pixel with no reading (NaN or 0)
     keeps none, one with five of its nine missing gets none, and a step stays where it is."""
-    from scipy import ndimage
-
     rng = np.random.default_rng(0)
     depth = rng.uniform(1.0, 2.0, (40, 50)).astype(np.float32)
     inner = (slice(1, -1), slice(1, -1))
@@ -785,6 +784,17 @@ def test_a_box_between_lower_ones_touching_it_stands_on_the_table(sigma_m):
     assert tall.size[2] == pytest.approx(0.0718, abs=0.002)
 
 
+def test_extents_are_those_of_find_objects():
+    """The band test's bounding boxes, from each piece's pixels, are ndimage's."""
+    labels, count = ndimage.label(np.random.default_rng(1).random((60, 80)) > 0.5)
+    flat = np.flatnonzero(labels)
+    group = (labels.reshape(-1)[flat] - 1).astype(np.int32)
+    extents = _extents(flat, group, count, labels.shape[1])
+    assert count > 100
+    for (r0, r1, c0, c1), (rows, cols) in zip(extents, ndimage.find_objects(labels), strict=True):
+        assert (r0, r1, c0, c1) == (rows.start, rows.stop, cols.start, cols.stop)
+
+
 def test_noise_holes_do_not_make_a_narrow_top_a_band():
     """The seam test shrinks a piece between colour edges by 5 mm from each side (5 pixels
     where the nearest reading is 0.6 m away): nothing left, it is a band (a seam's dark
@@ -804,8 +814,10 @@ def test_noise_holes_do_not_make_a_narrow_top_a_band():
         h = np.full(labels.shape, 0.1, dtype=np.float32)
         d = np.full(labels.shape, 1.0, dtype=np.float32)
         counts = np.bincount(labels.reshape(-1), minlength=2)
+        flat = np.flatnonzero(labels)
+        extents = _extents(flat, np.zeros(len(flat), dtype=np.int32), 1, labels.shape[1])
         found, _ = _bands(
-            labels, h, d, np.array([1]), counts, 0.6 / lens.fx, lens, support, (220, 120)
+            labels, h, d, np.array([1]), extents, counts, 0.6 / lens.fx, lens, support, (220, 120)
         )
         assert bool(found[0]) is band
 

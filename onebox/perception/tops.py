@@ -274,6 +274,7 @@ def plateaus(
             h,
             d,
             big,
+            _extents(p_idx, p_top, tops_n, width_p),
             pixels,
             float(np.nanmin(d)) / lens.fx,
             lens,
@@ -422,6 +423,7 @@ def _bands(
     h: Float32Array,
     d: Float32Array,
     big: npt.NDArray[np.intp],
+    extents: npt.NDArray[np.intp],
     counts: npt.NDArray[np.intp],
     footprint_m: float,
     lens: Intrinsics,
@@ -436,20 +438,19 @@ def _bands(
     carton's side, many times longer than it is wide (a short thin piece is a strip of
     something else, such as a box mostly hidden under another). A pixel with no reading is
     no edge: dropout does not thin a top; nor is a lone pixel cut out of the piece by noise
-    (three of its four neighbours are the piece). ``origin``: the picture's row and column of
-    ``labels``' first."""
+    (three of its four neighbours are the piece). ``extents``: each piece's first and last
+    row and column, each past the end (:func:`_extents`); ``origin``: the picture's row and
+    column of ``labels``' first."""
     k = min(max(math.ceil(BAND_M / max(footprint_m, 1e-6)), 2), BAND_MAX_PX)
     band = np.zeros(len(big), dtype=bool)
     ring = np.zeros(len(big), dtype=bool)
     is_big = np.zeros(len(counts), dtype=bool)
     is_big[big] = True
-    slices = ndimage.find_objects(labels)
     rows_n, cols_n = labels.shape
     normal = np.asarray(support.normal_camera, dtype=np.float64)
     for t, piece in enumerate(big):
-        where = slices[piece - 1]
-        if where is None:
-            continue
+        r0, r1, c0, c1 = (int(v) for v in extents[t])
+        where = slice(r0, r1), slice(c0, c1)
         tall, wide = where[0].stop - where[0].start, where[1].stop - where[1].start
         # Neither count is under 2 or over k: most pieces are plainly no band whatever they are.
         if max(tall, wide) < 16 or counts[piece] > 3 * k * (tall + wide):
@@ -492,6 +493,25 @@ def _bands(
         inside = labels[where]
         ring[t] = band[t] and bool((is_big[inside] & (inside != piece)).any())
     return band, ring
+
+
+def _extents(
+    flat: npt.NDArray[np.intp], group: npt.NDArray[np.int32], count: int, width: int
+) -> npt.NDArray[np.intp]:
+    """Per group, the bounding box of its pixels (flat indices into rows ``width`` long):
+    first row, last row + 1, first column, last column + 1 (what ``ndimage.find_objects``
+    gives, for the groups asked about only)."""
+    rows, cols = np.divmod(flat, width)
+    out = np.empty((count, 4), dtype=np.intp)
+    out[:, 0], out[:, 2] = rows.max() + 1, cols.max() + 1
+    out[:, 1] = out[:, 3] = -1
+    np.minimum.at(out[:, 0], group, rows)
+    np.maximum.at(out[:, 1], group, rows)
+    np.minimum.at(out[:, 2], group, cols)
+    np.maximum.at(out[:, 3], group, cols)
+    out[:, 1] += 1
+    out[:, 3] += 1
+    return out
 
 
 def _band_pixels(
