@@ -160,6 +160,8 @@ def main() -> None:
                 scenes = pallets(taped="taped" in title)
             else:
                 scenes = randoms(8, 3)
+        if not scenes:  # --scenes, --empty or --pallets 0: the case is left out
+            continue
         errors = Errors()
         run_case(scenes, noise, errors)
         report(title, errors, args.verbose)
