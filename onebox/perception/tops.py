@@ -451,7 +451,7 @@ def _bands(
     for t, piece in enumerate(big):
         r0, r1, c0, c1 = (int(v) for v in extents[t])
         where = slice(r0, r1), slice(c0, c1)
-        tall, wide = where[0].stop - where[0].start, where[1].stop - where[1].start
+        tall, wide = r1 - r0, c1 - c0
         # Neither count is under 2 or over k: most pieces are plainly no band whatever they are.
         if max(tall, wide) < 16 or counts[piece] > 3 * k * (tall + wide):
             continue
