@@ -818,35 +818,31 @@ def _measure_all(
     # lies from it.
     stand_off = np.full(len(edge), np.inf)
     risen_far = np.zeros(len(edge), dtype=bool)
+    near_steps, far_steps = np.arange(1, 4), np.arange(4, PAD + 1)
     for offset in offsets:
         off = label_at[e_flat + offset] != e_top + 1
         beyond = h_flat[e_flat + offset]
         rise = np.fmax(np.fmax(beyond, h_flat[e_flat + 2 * offset]), h_flat[e_flat + 3 * offset])
         with np.errstate(invalid="ignore"):
             risen = off & (rise > e_level)
-        hidden |= risen
-        at = np.flatnonzero(risen)
-        for k in (1, 2, 3):
-            f = e_flat[at] + k * offset
-            with np.errstate(invalid="ignore"):
-                up = h_flat[f] > e_level[at]
-            f, on = f[up], at[up]
+            hidden |= risen
+            at = np.flatnonzero(risen)
+            # The rising points 1 to 3 pixels past: the nearest of them sets the stand-off.
+            f = e_flat[at, np.newaxis] + near_steps * offset
+            up = h_flat[f] > e_level[at, np.newaxis]
+            f, on = f[up], np.broadcast_to(at[:, np.newaxis], up.shape)[up]
             r, c = np.divmod(f, tops.width)
             pa, pb = _in_plane(basis, across[c + tops.shift[1]], down[r + tops.shift[0]], d_flat[f])
-            stand_off[on] = np.fmin(stand_off[on], np.hypot(pa - a[on], pb - b[on]))
-        unsure |= off & np.isnan(beyond)
-        # Past a band with no reading (a stereo camera's at a depth edge, as wide as a steep
-        # face seen past it and the band each side of that), the first reading says whether
-        # the surface rises there.
-        gap = np.flatnonzero(off & np.isnan(rise))
-        far, undecided = e_flat[gap], np.ones(len(gap), dtype=bool)
-        for k in range(4, PAD + 1):
-            beyond_k = h_flat[far + k * offset]
-            with np.errstate(invalid="ignore"):
-                up = undecided & (beyond_k > e_level[gap])
-                undecided &= np.isnan(beyond_k)
-            risen_far[gap[up]] = True
-        with np.errstate(invalid="ignore"):
+            np.fmin.at(stand_off, on, np.hypot(pa - a[on], pb - b[on]))
+            unsure |= off & np.isnan(beyond)
+            # Past a band with no reading (a stereo camera's at a depth edge, as wide as a
+            # steep face seen past it and the band each side of that), the first reading says
+            # whether the surface rises there.
+            gap = np.flatnonzero(off & np.isnan(rise))
+            beyond_far = h_flat[e_flat[gap, np.newaxis] + far_steps * offset]
+            read = ~np.isnan(beyond_far)
+            first = beyond_far[np.arange(len(gap)), read.argmax(axis=1)]
+            risen_far[gap[read.any(axis=1) & (first > e_level[gap])]] = True
             drop |= off & (np.fmin(beyond, h_flat[e_flat + 2 * offset]) < e_low)
     # Past a dropout band something rises: hidden as much as by a rise right past the top.
     rise_near = hidden.copy()
