@@ -1495,28 +1495,45 @@ def _seams(
     across, down = lens.rays(cols_n, rows_n)
     basis = plane_basis(support, None)
     found: list[tuple[int, npt.NDArray[np.intp]]] = []
-    for p in plateaus:
-        if p.rect is None or p.rect.length_m < 2.0 * segment.SEAM_MIN_M:
-            continue
-        t = p.label
-        part = slice(int(tops.starts[t]), int(tops.starts[t] + tops.counts[t]))
-        flat = tops.flat[part]
-        shade = grey_flat[flat]
-        cut = cut_flat[flat] | segment.valleys(grey_flat, flat, tops.width, colour_step)
+    long = [
+        (p, p.rect)
+        for p in plateaus
+        if p.rect is not None and p.rect.length_m >= 2.0 * segment.SEAM_MIN_M
+    ]
+    if not long:
+        return found
+    # Every long top's pixels at once, then top by top.
+    parts = [
+        slice(int(tops.starts[p.label]), int(tops.starts[p.label] + tops.counts[p.label]))
+        for p, _ in long
+    ]
+    at = np.concatenate([np.arange(part.start, part.stop) for part in parts])
+    flat = tops.flat[at]
+    dark = segment.valleys(grey_flat, flat, tops.width, colour_step)
+    # Each pixel's ray met with the top's plane, not its reading: a stereo camera's noise
+    # along the ray would smear the line over several footprints.
+    top_height = np.repeat(
+        [p.height_m for p, _ in long], [part.stop - part.start for part in parts]
+    )
+    d = (top_height - support.offset_camera_m) / s_flat[flat].astype(np.float64)
+    pa_all, pb_all = _in_plane(basis, across[tops.cols[at]], down[tops.rows[at]], d)
+    start = 0
+    for (p, rect), part in zip(long, parts, strict=True):
+        mine = slice(start, start + part.stop - part.start)
+        start = mine.stop
+        shade = grey_flat[flat[mine]]
+        cut = cut_flat[flat[mine]] | dark[mine]
         if np.count_nonzero(cut) * p.footprint_m < segment.SEAM_MIN_M:
             continue
-        # Each pixel's ray met with the top's plane, not its reading: a stereo camera's noise
-        # along the ray would smear the line over several footprints.
-        d = (p.height_m - support.offset_camera_m) / s_flat[flat].astype(np.float64)
-        pa, pb = _in_plane(basis, across[tops.cols[part]], down[tops.rows[part]], d)
-        ax, ay = p.rect.axis
+        pa, pb = pa_all[mine], pb_all[mine]
+        ax, ay = rect.axis
         u, v = pa * ax + pb * ay, pb * ax - pa * ay
         bin_m = SEAM_BIN * p.footprint_m
         at_u = segment.seam_lines(u, v, cut, shade, colour_step, bin_m)
         at_v = segment.seam_lines(v, u, cut, shade, colour_step, bin_m)
         if at_u or at_v:
             cell = np.searchsorted(at_u, u) * (len(at_v) + 1) + np.searchsorted(at_v, v)
-            found.append((t, cell))
+            found.append((p.label, cell))
     return found
 
 
