@@ -57,6 +57,7 @@ from onebox.errors import SettingError
 from onebox.geometry import FrameError, FrameTree, matrix_of
 from onebox.perception import seed
 from onebox.perception.boxes import Box, BoxFinder, FinderSettings, Found
+from onebox.perception.tops import MAX_PIXELS
 from onebox.rectify import Rectifier, lens_of
 from onebox.sync import StampClock, Stamped, StampMatcher
 from schemas import (
@@ -145,6 +146,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "ignore anything standing higher than this above the surface, metres",
         kind=optional_metres,
     )
+    settings.add(
+        group,
+        "max_pixels",
+        MAX_PIXELS,
+        "pictures with more pixels are read at every k-th pixel to keep up with the camera "
+        "(1280 x 720 at every 2nd); 0 reads every pixel",
+    )
     group.add_argument(
         "--method",
         choices=("boxes", "seed"),
@@ -205,6 +213,7 @@ class LocatorSettings:
     noise_sigma_m: float | None = None
     workspace: tuple[tuple[float, float], ...] | None = None
     max_height_m: float | None = None
+    max_pixels: int = MAX_PIXELS
     method: str = "boxes"
     use_colour: bool = True
     slop_ns: int = 0
@@ -227,6 +236,8 @@ class LocatorSettings:
             raise SettingError(f"--log-interval-s {args.log_interval_s}: must be above 0")
         if args.noise_sigma is not None and args.noise_sigma <= 0:
             raise SettingError(f"noise_sigma {args.noise_sigma}: must be above 0 (metres)")
+        if args.max_pixels < 0:
+            raise SettingError(f"max_pixels {args.max_pixels}: must be 0 (every pixel) or more")
         if args.max_height is not None and args.max_height <= args.min_height:
             raise SettingError(f"max_height {args.max_height}: must be above min_height")
         if args.table_z is not None and args.pose_source == "none":
@@ -244,6 +255,7 @@ class LocatorSettings:
             noise_sigma_m=args.noise_sigma,
             workspace=workspace,
             max_height_m=args.max_height,
+            max_pixels=args.max_pixels,
             method=args.method,
             use_colour=args.colour,
             slop_ns=round(args.slop_ms * 1e6),
@@ -261,6 +273,7 @@ class LocatorSettings:
             table_z_m=self.table_z_m,
             workspace=self.workspace,  # type: ignore[arg-type]
             max_height_m=self.max_height_m,
+            max_pixels=self.max_pixels or None,
         )
 
 

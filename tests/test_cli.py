@@ -184,6 +184,13 @@ def test_no_flag_abbreviations():
     assert done.returncode == 2 and "unknown command '--vers'" in done.stderr
 
 
+def test_locator_refuses_a_negative_max_pixels_in_one_line():
+    """--max-pixels -1: one line naming the setting, exit 2."""
+    done = onebox("locator", "--max-pixels", "-1")
+    assert done.returncode == 2
+    assert done.stderr == "onebox locator: max_pixels -1: must be 0 (every pixel) or more\n"
+
+
 def test_a_mistyped_command_suggests_the_right_one():
     """`onebox ehco` says: did you mean `onebox echo`?"""
     done = onebox("ehco", "detections")

@@ -13,8 +13,9 @@ How a picture is read (whole-array work; Python loops only over tops, a few scal
 Steps 2 to 5 are :mod:`onebox.perception.tops`, step 6 :mod:`onebox.perception.bases`; this
 module reads the picture at its size, fits the support and reports:
 
-0. Pictures larger than ``max_pixels`` (default 640 x 480) are read at every k-th pixel, the
-   lens scaled exactly (1280 x 720 is read as 640 x 360).
+0. Pictures larger than ``max_pixels`` (default 848 x 480: a D435's depth picture and an
+   Azure Kinect's 640 x 576 are read whole) are read at every k-th pixel, the lens scaled
+   exactly (1280 x 720 is read as 640 x 360).
 1. The support (:mod:`onebox.perception.support`): the lowest large plane facing up. Where
    the depth noise there is 15 mm or more (a D435 past 2 m), steps 2 to 7 run twice: on the
    picture, then on its 3 x 3 median (:func:`onebox.perception.segment.median3`, its noise
