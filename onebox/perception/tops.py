@@ -1508,24 +1508,22 @@ def _seams(
     if not long:
         return found
     # Every long top's pixels at once, then top by top.
-    parts = [
-        slice(int(tops.starts[p.label]), int(tops.starts[p.label] + tops.counts[p.label]))
-        for p, _ in long
-    ]
-    at = np.concatenate([np.arange(part.start, part.stop) for part in parts])
+    sizes = [int(tops.counts[p.label]) for p, _ in long]
+    at = np.concatenate(
+        [
+            np.arange(tops.starts[p.label], tops.starts[p.label] + n)
+            for (p, _), n in zip(long, sizes, strict=True)
+        ]
+    )
     flat = tops.flat[at]
     dark = segment.valleys(grey_flat, flat, tops.width, colour_step)
     # Each pixel's ray met with the top's plane, not its reading: a stereo camera's noise
     # along the ray would smear the line over several footprints.
-    top_height = np.repeat(
-        [p.height_m for p, _ in long], [part.stop - part.start for part in parts]
-    )
+    top_height = np.repeat([p.height_m for p, _ in long], sizes)
     d = (top_height - support.offset_camera_m) / s_flat[flat].astype(np.float64)
     pa_all, pb_all = _in_plane(basis, across[tops.cols[at]], down[tops.rows[at]], d)
-    start = 0
-    for (p, rect), part in zip(long, parts, strict=True):
-        mine = slice(start, start + part.stop - part.start)
-        start = mine.stop
+    for (p, rect), end, n in zip(long, np.cumsum(sizes), sizes, strict=True):
+        mine = slice(end - n, end)
         shade = grey_flat[flat[mine]]
         cut = cut_flat[flat[mine]] | dark[mine]
         if np.count_nonzero(cut) * p.footprint_m < segment.SEAM_MIN_M:
