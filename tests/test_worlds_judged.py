@@ -109,6 +109,32 @@ def test_random_pallet_taped_every_carton_right(seed, noise):
     assert max(judged.centre_mm) <= (5.0 if noise == "none" else 10.0), judged.notes
 
 
+@pytest.mark.parametrize("seed", [14, 37, 53])
+def test_random_pallet_taped_through_d435_flaps_of_one_length_joined(seed):
+    """Through the D435's noise at 2 m (3 sigma about 45 mm) a flap's end reads up to 25 mm
+    long, as the side face's first readings are within the top's tolerance. Finders before
+    asked the flaps and the tape for one length within 5 %, and reported a 250 mm carton as
+    two boxes a flap wide (one of them false)."""
+    judged = _judged(random_pallet(seed, taped=True), "d435")
+    assert judged.missed == 0 and judged.false == 0, judged.notes
+    assert judged.found >= 4
+    assert max(judged.height_mm + judged.hidden_height_mm) <= 5.0, judged.notes
+    assert max(judged.centre_mm) <= 10.0, judged.notes
+
+
+@pytest.mark.parametrize(("seed", "noise"), [(20, "none"), (38, "d435"), (3, "azure_kinect")])
+def test_random_pallet_taped_scraps_round_a_box_on_a_carton_are_no_boxes(seed, noise):
+    """A smaller carton on a taped one hides most of its top: what shows are scraps of flap
+    and tape, cut apart by colour, each against a flap at its level on one side and the box
+    on it on another. Finders before reported the scraps of tape (5-8 cm) as boxes of the
+    carton's height: five on seed 20."""
+    judged = _judged(random_pallet(seed, taped=True), noise)
+    assert judged.missed == 0 and judged.false == 0, judged.notes
+    assert judged.found >= 4
+    assert max(judged.height_mm + judged.hidden_height_mm) <= (1.0 if noise == "none" else 5.0)
+    assert max(judged.centre_mm) <= (5.0 if noise == "none" else 10.0), judged.notes
+
+
 @pytest.mark.parametrize(("seed", "noise"), [(8, "none"), (8, "d435"), (10, "d435")])
 def test_random_pallet_in_a_d435s_own_picture_every_carton_found(seed, noise):
     """A D435's own depth picture, 848 x 480 through an 87-degree lens, is read whole. Read at

@@ -207,8 +207,21 @@ def _read(
     if not plateaus:
         return []
     basis = tops.plane_basis(support, camera_to_world)
+    # Scraps of a carton's top round a box on it are levels, not boxes, if that box is found
+    # to stand at their level; if it is not, the bases are found again with them as boxes.
+    scraps = tops.scraps([p for p in plateaus if p.is_box], plateaus)
+    fresh = [dict(vars(p)) for p in plateaus]
+    for scrap in scraps:
+        scrap.is_box = False
     boxes = [p for p in plateaus if p.is_box]
     bases.find_bases(boxes, plateaus, height_m, labels_top, lens, support, settings)
+    confirmed = {id(p) for p in tops.scraps(scraps, plateaus, standing=True)}
+    if len(confirmed) < len(scraps):
+        for p, state in zip(plateaus, fresh, strict=True):
+            vars(p).update(state)
+            p.is_box = p.is_box and id(p) not in confirmed
+        boxes = [p for p in plateaus if p.is_box]
+        bases.find_bases(boxes, plateaus, height_m, labels_top, lens, support, settings)
     bases.raise_to_faces(boxes, plateaus, depth, colour, lens, support, settings)
     bases.shadowed_sides(boxes, support.offset_camera_m, settings)
     afloat = bases.seen_under(boxes, depth, lens, support)

@@ -1297,13 +1297,15 @@ def _surrounded(
 
 
 def _side_by_side(a: Plateau, b: Plateau) -> bool:
-    """Two tops lying parallel, of one length, ends level, their long sides touching."""
+    """Two tops lying parallel, of one length, ends level, their long sides touching. Through
+    noise an end reads up to a tolerance long (a side face's first readings within it of the
+    top), so the lengths and ends may differ by half the larger tolerance as well."""
     assert a.rect is not None and b.rect is not None
     (a0, a1), (b0, b1) = a.rect.axis, b.rect.axis
     if abs(a0 * b1 - a1 * b0) > PARALLEL_SIN:
         return False
     length = max(a.rect.length_m, b.rect.length_m)
-    slack = max(0.012, 0.05 * length)
+    slack = max(0.012, 0.05 * length, 0.5 * max(a.tolerance_m, b.tolerance_m))
     if abs(a.rect.length_m - b.rect.length_m) > slack:
         return False
     dx, dy = b.rect.middle[0] - a.rect.middle[0], b.rect.middle[1] - a.rect.middle[1]
@@ -1407,6 +1409,57 @@ def _print_strips(plateaus: list[Plateau]) -> list[Plateau]:
                 strips.append(strip)
                 break
     return strips
+
+
+def scraps(
+    candidates: list[Plateau], plateaus: list[Plateau], standing: bool = False
+) -> list[Plateau]:
+    """Of ``candidates``, the tops no more than ``PRINT_STRIP_M`` across with a top at their
+    level touching one side and a box standing at their level touching another (the opposite
+    side, or, if the top is no longer than that either, any): what shows of a carton's flaps
+    and tape round a smaller carton on it, cut apart by colour, not boxes of their own. Before
+    the bases are known (``standing`` False) any higher top counts as standing at their level.
+    A narrow box packed against a carton of its height and a box on that carton is lost."""
+    tops = [p for p in plateaus if p.rect is not None]
+    found = []
+    for scrap in candidates:
+        rect = scrap.rect
+        if rect is None or rect.width_m > PRINT_STRIP_M:
+            continue
+        level, above = [], []
+        for other in tops:
+            if other is scrap:
+                continue
+            # Level within the tolerances alone: flaps and tape are one sheet.
+            reach = math.hypot(other.tolerance_m, scrap.tolerance_m)
+            if abs(other.height_m - scrap.height_m) < reach:
+                level.append(other)
+            elif other.height_m > scrap.height_m and (
+                not standing or (other.is_box and abs(other.base_m - scrap.height_m) < reach)
+            ):
+                above.append(other)
+        if not level or not above:
+            continue
+        ax = np.asarray(rect.axis)
+        perp = np.array([-ax[1], ax[0]])
+        beside_any = on_any = False
+        for out, side, span, extent in (
+            (perp, ax, rect.width_m, rect.length_m),
+            (ax, perp, rect.length_m, rect.width_m),
+        ):
+            if span > PRINT_STRIP_M:
+                continue
+            beside = _touching(scrap, level, out, side, extent)
+            on = _touching(scrap, above, out, side, extent)
+            if beside and on and len(beside | on) == 2:
+                found.append(scrap)
+                break
+            beside_any |= bool(beside)
+            on_any |= bool(on)
+        else:
+            if beside_any and on_any and rect.length_m <= PRINT_STRIP_M:
+                found.append(scrap)
+    return found
 
 
 def _touching(
