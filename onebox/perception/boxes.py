@@ -210,7 +210,7 @@ def _read(
     # Scraps of a carton's top round a box on it are levels, not boxes, if that box is found
     # to stand at their level; if it is not, the bases are found again with them as boxes.
     scraps = tops.scraps([p for p in plateaus if p.is_box], plateaus)
-    fresh = [dict(vars(p)) for p in plateaus]
+    fresh = [dict(vars(p)) for p in plateaus] if scraps else []
     for scrap in scraps:
         scrap.is_box = False
     boxes = [p for p in plateaus if p.is_box]
