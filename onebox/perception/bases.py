@@ -77,6 +77,34 @@ def _probes(box: Plateau) -> Float64Array:
     return result
 
 
+def _face_slant(boxes: list[Plateau], probes: Float64Array) -> Float64Array:
+    """Per box, line and point of :func:`_probes`: how far under a point's level (per metre
+    of the camera's height over it) the ray through it meets the box's side behind it, where
+    the camera sees that side's face (inf where it does not). The camera stands over the
+    support plane's origin."""
+    sides = len(PROBE_FRACTIONS)
+    result = np.full(probes.shape[:3], np.inf)
+    for i, box in enumerate(boxes):
+        assert box.rect is not None
+        rect = box.rect
+        ax = np.asarray(rect.axis)
+        perp = np.array([-ax[1], ax[0]])
+        mid = np.asarray(rect.middle)
+        for k, (out, half) in enumerate(
+            ((ax, rect.length_m), (-ax, rect.length_m), (perp, rect.width_m), (-perp, rect.width_m))
+        ):
+            # The camera's distance out past the side, and each point's.
+            camera_out = -float(mid @ out) - half / 2
+            lines = probes[i, k * sides : (k + 1) * sides]
+            point_out = (lines - mid) @ out - half / 2
+            with np.errstate(divide="ignore"):
+                slant = point_out / (camera_out - point_out)
+            result[i, k * sides : (k + 1) * sides] = np.where(
+                (camera_out > point_out) & (point_out > 0), slant, np.inf
+            )
+    return result
+
+
 def shadowed_sides(boxes: list[Plateau], camera_height_m: float, settings: FinderSettings) -> None:
     """A taller box beside a box, between it and the camera, hides a band of its top along
     that side (band = height difference x how far the camera looks past the taller top). On
@@ -428,7 +456,13 @@ def find_bases(
         any_known = known.any(axis=-1)
         h_first = np.take_along_axis(seen_h, first, -1)[..., 0]
         label_first = np.take_along_axis(seen_label, first, -1)[..., 0]
-        match = any_known & (np.abs(h_first - lh[..., 0]) < lt[..., 0])
+        # Past a side whose face the camera sees, a reading on no top just under the level
+        # may be that face, right behind the probe point: a point tells the level from the
+        # face only by half the drop the ray makes between them.
+        drop = (support.offset_camera_m - lh) * _face_slant(boxes, probes)[pair_b]
+        face_tol = np.minimum(lt, 0.5 * np.take_along_axis(drop, first, -1))[..., 0]
+        near_tol = np.where((label_first < 0) & (pair_l > 0)[:, np.newaxis], face_tol, lt[..., 0])
+        match = any_known & (np.abs(h_first - lh[..., 0]) < near_tol)
         # The level's own top, or any top at its height (one carton's top seen on both
         # sides of the box across it is two pieces), or no top (the support, a fragment).
         top_h = np.append(label_height, np.nan)[np.where(label_first >= 0, label_first, -1)]
