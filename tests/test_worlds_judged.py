@@ -180,6 +180,31 @@ def test_camera_at_45_degrees_a_cube_stands_on_the_table_not_on_a_lower_top(nois
     assert max(judged.centre_mm) <= (2.0 if noise == "none" else 6.0), judged.notes
 
 
+@pytest.mark.parametrize("noise", ["none", "azure_kinect"])
+def test_a_carton_carrying_a_smaller_one_is_a_box_of_its_own(noise):
+    """Two stacks: three cartons, each smaller than the one under it and turned on it, and two.
+    The middle carton's top shows only round the one on it (47 % of it seen). Finders before
+    took a top more than half covered for a platform (a pallet's, not a box) and left the
+    middle carton out; a top two or more boxes stand on still is one."""
+    brown = (0.72, 0.55, 0.36, 1.0)
+    scene = SceneDesc(
+        camera=CameraDesc(x=0.1, y=-0.45, z=1.3, tilt_deg=25.0, width=640, height=480),
+        table=TableDesc(z=0.0, size=(2.0, 2.0)),
+        boxes=(
+            BoxDesc(-0.2, 0.0, (0.30, 0.25, 0.20), yaw_deg=5.0, rgba=brown),
+            BoxDesc(-0.2, 0.0, (0.25, 0.20, 0.15), yaw_deg=15.0, on=0, rgba=(0.68, 0.52, 0.34, 1)),
+            BoxDesc(-0.2, 0.0, (0.15, 0.12, 0.10), yaw_deg=35.0, on=1, rgba=(0.75, 0.58, 0.4, 1)),
+            BoxDesc(0.25, 0.05, (0.20, 0.20, 0.25), yaw_deg=-20.0, rgba=brown),
+            BoxDesc(0.25, 0.05, (0.18, 0.14, 0.12), yaw_deg=-5.0, on=3, rgba=(0.7, 0.5, 0.3, 1)),
+        ),
+    )
+    judged = _judged(scene, noise)
+    assert judged.found == 2 and judged.missed == 0 and judged.false == 0, judged.notes
+    assert judged.hidden_found >= 1, judged.notes
+    assert max(judged.height_mm + judged.hidden_height_mm) <= 1.0, judged.notes
+    assert max(judged.hidden_size_mm) <= 3.0, judged.notes
+
+
 def test_random_pallet_is_the_same_for_a_seed():
     """The same seed gives the same pallet; another seed another; the pallet is box 0."""
     assert random_pallet(11) == random_pallet(11)

@@ -638,10 +638,11 @@ def find_bases(
                     changed = True
         if not changed:
             break
+    carried = {j: list(base.values()).count(j) for j in set(base.values())}
     platforms = {
         j
         for i, j in base.items()
-        if levels[j] is not None and _is_platform(levels[j], boxes[i])  # type: ignore[arg-type]
+        if levels[j] is not None and _is_platform(levels[j], boxes[i], carried[j])  # type: ignore[arg-type]
     }
     for i, box in enumerate(boxes):
         if i not in base:
@@ -943,13 +944,14 @@ def _own_faces(
                 allowed[j, i] = False
 
 
-def _is_platform(lower: Plateau, upper: Plateau) -> bool:
+def _is_platform(lower: Plateau, upper: Plateau, carried: int) -> bool:
     """A box's base that is no box of its own: a top that goes on under the box past a hidden
-    side (the box hides it), or one mostly covered by what stands on it."""
+    side (the box hides it), or one mostly covered by the ``carried`` boxes standing on it,
+    two or more (a pallet's). A carton mostly covered by the one carton on it is a box."""
     if not lower.is_box or lower.rect is None:
         return True
     rect = lower.rect
-    if lower.visible_m2 < 0.5 * rect.length_m * rect.width_m:
+    if carried >= 2 and lower.visible_m2 < 0.5 * rect.length_m * rect.width_m:
         return True
     return rect.hidden_sides > 0 and (
         (_reaches_under(lower, upper, slack=-0.0) and not _inside(lower, upper))
