@@ -421,6 +421,9 @@ def find_bases(
     for j, level in enumerate(levels):
         if level is None:
             continue
+        if level.upright:
+            allowed[j] = False
+            continue
         for i, box in enumerate(boxes):
             if allowed[j, i]:
                 allowed[j, i] = _reaches_under(level, box, rows=True)

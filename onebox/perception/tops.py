@@ -126,6 +126,10 @@ class Plateau:
     """Stands on a platform (a pallet's top), where cartons stand packed side by side."""
     ledge_m: float | None = None
     """The highest flat level seen just past the top's outline (see :func:`_ledges`)."""
+    upright: bool = False
+    """Its plane fitted along the rays stands more than UPRIGHT_DEG from the support: a side
+    face seen nearly edge-on through noise (its readings' spread within the tolerance), no
+    level anything stands on."""
     hidden_band_m: float = 0.0
     """How far, along the support, what rises past the top's hidden outline stands off it
     (median over the hidden outline): a wall rising at the top's edge stands at it, a taller
@@ -908,6 +912,7 @@ def _measure_all(
             float(area[t]),
         )
         p.ledge_m = None if np.isnan(ledge[t]) else float(ledge[t])
+        p.upright = bool(tilt[t] > settings.max_top_tilt_deg and ray_tilt[t] > UPRIGHT_DEG)
         part = slice(int(edge_starts[t]), int(edge_stops[t]))
         bands = stand_off[part][hidden[part]]
         bands = bands[np.isfinite(bands)]
@@ -1707,6 +1712,8 @@ def _seen_fill(
     return min(whole_area_m2 / seen_m2, 1.0)
 
 
+UPRIGHT_DEG = 60.0
+"""A piece whose plane along the rays stands this far from the support is a face (Plateau)."""
 THIN_ASPECT = 2.0
 """A top this many times as long as it is wide, its long sides dropping away, is measured
 across by their many outline points (:func:`_extent`)."""
