@@ -219,6 +219,17 @@ def _nine_cartons() -> SceneDesc:
     )
 
 
+def test_cartons_touching_in_rows_stand_on_the_floor():
+    """A carton 2 cm taller than its neighbour shows a strip of its face over the neighbour's
+    top, seen nearly edge-on from above: one pixel there steps 35 mm down the face, and the
+    colour step where the neighbour's top meets it read as a seam 32 mm under that top. The
+    finder before stood the carton on that seam: 52 mm tall for 220."""
+    judged = _judged(_nine_cartons())
+    assert judged.missed == 0 and judged.false == 0, judged.notes
+    assert judged.found + judged.hidden_found == 9, judged.notes
+    assert max(judged.height_mm + judged.hidden_height_mm) <= 1.0, judged.notes
+
+
 def test_cartons_touching_in_rows_through_d435_not_on_their_faces():
     """Through a D435's noise the near faces of the front row, seen at a slant and spread over
     the tolerance, came out as one piece 0.89 m long at 126 mm, and the finder before stood

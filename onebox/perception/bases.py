@@ -719,13 +719,16 @@ def raise_to_faces(
         # The support, every top, and the box's own ledge.
         levels = [(0.0, None), *tops, *([] if box.ledge_m is None else [(box.ledge_m, None)])]
         slack = faces.resolution_m(box.height_m) + tol
+        # Seen at a slant, a pixel's step down the face is long: the seam where a top beside
+        # meets the face is read up to a pixel's step under that top.
+        step = 0.0 if bottom is None else _face_step_m(box, bottom.seam_sides, support)
         if (
             bottom is not None
             and bottom.seam
             and any(
                 p is not None and p is not box and _beside(p, box, bottom.seam_sides)
                 for h, p in levels
-                if bottom.low_m - slack <= h <= bottom.high_m + slack
+                if bottom.low_m - slack <= h <= bottom.high_m + slack + step
             )
         ):
             # A seam in the colour where a top beside the box meets its face (the face goes on
@@ -881,6 +884,20 @@ def _beside(lower: Plateau, upper: Plateau, sides: tuple[tuple[float, float], ..
     return any(
         float(np.max(rel @ np.array(o))) - upper.rect.half_extent(*o) > SEAM_REACH_M for o in sides
     )
+
+
+def _face_step_m(box: Plateau, sides: tuple[tuple[float, float], ...], support: Support) -> float:
+    """How far down a side face of ``box`` one pixel's footprint steps, at the most over
+    ``sides`` (outward normals): a footprint times the camera's height over the top by how far
+    the camera stands out past the side (it stands over the support plane's origin)."""
+    assert box.rect is not None
+    rect = box.rect
+    steps = [0.0]
+    for o in sides:
+        out = -float(np.asarray(rect.middle) @ np.asarray(o)) - rect.half_extent(*o)
+        if out > 0:
+            steps.append(box.footprint_m * (support.offset_camera_m - box.height_m) / out)
+    return max(steps)
 
 
 FACE_TOLERANCE_M = 0.003
