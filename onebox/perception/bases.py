@@ -10,6 +10,7 @@ the support, a lower top, a platform or its own ledge, from probe lines out past
 from __future__ import annotations
 
 import math
+from collections import Counter
 from dataclasses import replace
 
 import numpy as np
@@ -77,11 +78,17 @@ def _probes(box: Plateau) -> Float64Array:
     return result
 
 
+def _camera_out_m(rect: Rectangle, outward: npt.ArrayLike) -> float:
+    """How far the camera stands out past the rectangle's side whose outward unit normal is
+    ``outward`` (positive: it sees that side's face); it stands over the support's origin."""
+    o = np.asarray(outward, dtype=np.float64)
+    return -float(np.asarray(rect.middle) @ o) - rect.half_extent(float(o[0]), float(o[1]))
+
+
 def _face_slant(boxes: list[Plateau], probes: Float64Array) -> Float64Array:
     """Per box, line and point of :func:`_probes`: how far under a point's level (per metre
     of the camera's height over it) the ray through it meets the box's side behind it, where
-    the camera sees that side's face (inf where it does not). The camera stands over the
-    support plane's origin."""
+    the camera sees that side's face (inf where it does not)."""
     sides = len(PROBE_FRACTIONS)
     result = np.full(probes.shape[:3], np.inf)
     for i, box in enumerate(boxes):
@@ -90,13 +97,11 @@ def _face_slant(boxes: list[Plateau], probes: Float64Array) -> Float64Array:
         ax = np.asarray(rect.axis)
         perp = np.array([-ax[1], ax[0]])
         mid = np.asarray(rect.middle)
-        for k, (out, half) in enumerate(
-            ((ax, rect.length_m), (-ax, rect.length_m), (perp, rect.width_m), (-perp, rect.width_m))
-        ):
+        for k, out in enumerate((ax, -ax, perp, -perp)):
             # The camera's distance out past the side, and each point's.
-            camera_out = -float(mid @ out) - half / 2
+            camera_out = _camera_out_m(rect, out)
             lines = probes[i, k * sides : (k + 1) * sides]
-            point_out = (lines - mid) @ out - half / 2
+            point_out = (lines - mid) @ out - rect.half_extent(*out)
             with np.errstate(divide="ignore"):
                 slant = point_out / (camera_out - point_out)
             result[i, k * sides : (k + 1) * sides] = np.where(
@@ -641,7 +646,7 @@ def find_bases(
                     changed = True
         if not changed:
             break
-    carried = {j: list(base.values()).count(j) for j in set(base.values())}
+    carried = Counter(base.values())
     platforms = {
         j
         for i, j in base.items()
@@ -889,12 +894,11 @@ def _beside(lower: Plateau, upper: Plateau, sides: tuple[tuple[float, float], ..
 def _face_step_m(box: Plateau, sides: tuple[tuple[float, float], ...], support: Support) -> float:
     """How far down a side face of ``box`` one pixel's footprint steps, at the most over
     ``sides`` (outward normals): a footprint times the camera's height over the top by how far
-    the camera stands out past the side (it stands over the support plane's origin)."""
+    the camera stands out past the side."""
     assert box.rect is not None
-    rect = box.rect
     steps = [0.0]
     for o in sides:
-        out = -float(np.asarray(rect.middle) @ np.asarray(o)) - rect.half_extent(*o)
+        out = _camera_out_m(box.rect, o)
         if out > 0:
             steps.append(box.footprint_m * (support.offset_camera_m - box.height_m) / out)
     return max(steps)

@@ -936,10 +936,7 @@ def _measure_all(
         # Across a long narrow top whose long sides both drop away or end in the camera's
         # dropout (a box's, not a scrap of a carton's top cut off by colour), by its long
         # sides' many outline points.
-        ends = (*rect.edge_normals, *rect.dropout_normals)
-        falling = [n @ perp for n in np.asarray(ends).reshape(-1, 2)]
-        thin = rect.length_m >= THIN_ASPECT * rect.width_m
-        thin = thin and max(falling, default=0.0) > 0.99 and min(falling, default=0.0) < -0.99
+        thin = rect.length_m >= THIN_ASPECT * rect.width_m and _falls_both_ways(rect, perp)
         fill_area = _extent(on_axis, float(footprint[t]), clean, False) * _extent(
             on_perp, float(footprint[t]), clean, thin
         )
@@ -1713,7 +1710,8 @@ def _seen_fill(
 
 
 UPRIGHT_DEG = 60.0
-"""A piece whose plane along the rays stands this far from the support is a face (Plateau)."""
+"""A piece whose plane along the rays stands this far from the support is a face, no level
+(:attr:`Plateau.upright`)."""
 THIN_ASPECT = 2.0
 """A top this many times as long as it is wide, its long sides dropping away, is measured
 across by their many outline points (:func:`_extent`)."""
@@ -1885,22 +1883,33 @@ def _extent(values: Float64Array, footprint: float, trim: bool, straight: bool) 
     footprint over one more than the points within a footprint of it: a whole footprint made
     a box's top four pixels wide fill 0.8 of its rectangle. A disc's extremes are few points,
     and keep the footprint."""
-    span = _spread(values) if trim else float(np.ptp(values))
+    low, high = _ends(values, trim)
     if not straight:
-        return span + footprint
-    k = len(values) // 100 if trim else 0
-    low, high = np.partition(values, (k, len(values) - 1 - k))[[k, len(values) - 1 - k]]
+        return high - low + footprint
     near_low = int(np.count_nonzero(values < low + footprint))
     near_high = int(np.count_nonzero(values > high - footprint))
-    return span + footprint * (1.0 / (near_low + 1) + 1.0 / (near_high + 1))
+    return high - low + footprint * (1.0 / (near_low + 1) + 1.0 / (near_high + 1))
+
+
+def _falls_both_ways(rect: Rectangle, across: Float64Array) -> bool:
+    """Whether the surface is seen dropping away (or the camera's dropout) past both of the
+    rectangle's sides whose outward normals are +-``across``."""
+    ends = np.asarray((*rect.edge_normals, *rect.dropout_normals)).reshape(-1, 2) @ across
+    return bool(len(ends)) and float(ends.max()) > 0.99 and float(ends.min()) < -0.99
+
+
+def _ends(values: Float64Array, trim: bool) -> tuple[float, float]:
+    """The least and the greatest value; where ``trim``, the 1st and the 99th percentile (one
+    value in a hundred left out at each end; under a hundred values, none)."""
+    k = len(values) // 100 if trim else 0
+    low, high = np.partition(values, (k, len(values) - 1 - k))[[k, len(values) - 1 - k]]
+    return float(low), float(high)
 
 
 def _spread(values: Float64Array) -> float:
-    """From the 1st to the 99th percentile: the range less one value in a hundred at each end
-    (under a hundred values, the whole range)."""
-    k = len(values) // 100
-    low, high = np.partition(values, (k, len(values) - 1 - k))[[k, len(values) - 1 - k]]
-    return float(high - low)
+    """From the 1st to the 99th percentile (:func:`_ends`, trimmed)."""
+    low, high = _ends(values, True)
+    return high - low
 
 
 def cross(a: Float64Array, b: Float64Array) -> Float64Array:
