@@ -936,7 +936,8 @@ def _measure_all(
         # Across a long narrow top whose long sides both drop away or end in the camera's
         # dropout (a box's, not a scrap of a carton's top cut off by colour), by its long
         # sides' many outline points.
-        thin = rect.length_m >= THIN_ASPECT * rect.width_m and _falls_both_ways(rect, perp)
+        thin = rect.hidden_sides == 0 and rect.length_m >= THIN_ASPECT * rect.width_m
+        thin = thin and _falls_both_ways(rect, perp)
         fill_area = _extent(on_axis, float(footprint[t]), clean, False) * _extent(
             on_perp, float(footprint[t]), clean, thin
         )
