@@ -5,8 +5,10 @@
 
 Builds each world the way ``onebox sim`` does (random scenes from seeds, 640 x 480 with an
 hfov of 60 degrees unless told otherwise; random loaded pallets from seeds
-(:func:`onebox.world.random_scene.random_pallet`), the same pallets taped; scene/pallet.toml,
-scene/clutter.toml, the seed's world), renders colour and depth with MuJoCo, adds the depth
+(:func:`onebox.world.random_scene.random_pallet`), the same pallets taped; the random scenes
+looked at across, 45 degrees from straight down
+(:func:`onebox.world.random_scene.looking_across`); scene/pallet.toml, scene/clutter.toml,
+the seed's world), renders colour and depth with MuJoCo, adds the depth
 noise, and runs the box finder the locator runs (``onebox.perception.boxes.BoxFinder``) on the
 picture, the lens the sim publishes and the camera's pose, and judges what it finds against
 the ground truth (:mod:`onebox.testing.judged` says how: found, missed, false; a box partly
@@ -34,11 +36,13 @@ from onebox.perception.boxes import BoxFinder, FinderSettings
 from onebox.testing.judged import Judged, judge, render_scene
 from onebox.world import spec
 from onebox.world.noise import PRESETS, NoiseSpec
-from onebox.world.random_scene import random_pallet, random_scene
+from onebox.world.random_scene import looking_across, random_pallet, random_scene
 from onebox.world.scene import seed_scene
 from onebox.world.spec import SceneDesc
 
 SCENES = Path(__file__).resolve().parent.parent / "scene"
+ACROSS_TILT_DEG = 45.0
+"""The random scenes once more, seen this far from straight down (a robot's head)."""
 
 
 @dataclass
@@ -127,6 +131,9 @@ def main() -> None:
         ("random, sigma 1 mm", None, NoiseSpec(model="gaussian", sigma_m=0.001)),
         ("random, d435", None, PRESETS["d435"]),
         ("random, azure_kinect", None, PRESETS["azure_kinect"]),
+        ("random looked at across, 45 degrees, noise-free", None, PRESETS["none"]),
+        ("random looked at across, 45 degrees, d435", None, PRESETS["d435"]),
+        ("random looked at across, 45 degrees, azure_kinect", None, PRESETS["azure_kinect"]),
         (
             "empty tables, sigma 3 mm + speckle + edges",
             None,
@@ -158,6 +165,8 @@ def main() -> None:
                 scenes = empty()
             elif title.startswith("random pallets"):
                 scenes = pallets(taped="taped" in title)
+            elif title.startswith("random looked at across"):
+                scenes = [looking_across(scene, ACROSS_TILT_DEG) for scene in randoms(8, 3)]
             else:
                 scenes = randoms(8, 3)
         if not scenes:  # --scenes, --empty or --pallets 0: the case is left out

@@ -15,7 +15,7 @@ from scipy.spatial.transform import Rotation
 
 from onebox.errors import SceneError
 from onebox.world import scene, spec
-from onebox.world.random_scene import random_pallet, random_scene
+from onebox.world.random_scene import looking_across, random_pallet, random_scene
 from onebox.world.render import Capture, SceneRenderer
 from onebox.world.spec import CameraDesc, SceneDesc, TableDesc
 from schemas import GroundTruth
@@ -259,3 +259,18 @@ def test_taped_cartons_through_a_scene_file() -> None:
     bad = {"box": [{"x": 0.0, "y": 0.0, "size": [0.1, 0.1, 0.1], "tape": "yes"}]}
     with pytest.raises(SceneError, match=r"box\[0\]\.tape = 'yes': expected true or false"):
         spec.parse(bad)
+
+
+def test_a_random_scene_looked_at_across_keeps_what_the_camera_looks_at():
+    """The same scene 45 degrees from straight down: the same boxes, the camera at the same
+    height and turned the same way, its optical axis still through the table's middle."""
+    scene = random_scene(3, boxes=8, objects=3, width=640, height=480)
+    across = looking_across(scene, 45.0)
+    assert across.boxes == scene.boxes and across.objects == scene.objects
+    assert across.camera.tilt_deg == 45.0
+    assert (across.camera.z, across.camera.pan_deg) == (scene.camera.z, scene.camera.pan_deg)
+    forward = spec.world_from_optical(across.camera)[:, 2]
+    reach = (across.camera.z - scene.table.z) / -forward[2]
+    on_table = np.array([across.camera.x, across.camera.y]) + reach * forward[:2]
+    assert np.allclose(on_table, 0.0, atol=2e-4)
+    assert np.hypot(across.camera.x, across.camera.y) > np.hypot(scene.camera.x, scene.camera.y)

@@ -69,6 +69,21 @@ def _camera(
     )
 
 
+def looking_across(scene: SceneDesc, tilt_deg: float) -> SceneDesc:
+    """``scene`` seen ``tilt_deg`` from straight down (a robot's head looking across a table)
+    from the same height over the table and the same side, the optical axis still through the
+    table's middle: the camera steps back to look at what it looked at before."""
+    cam = dataclasses.replace(scene.camera, tilt_deg=tilt_deg)
+    forward = world_from_optical(cam)[:, 2]
+    reach = (cam.z - scene.table.z) / -forward[2]
+    return dataclasses.replace(
+        scene,
+        camera=dataclasses.replace(
+            cam, x=_round(-reach * forward[0], 1e-4), y=_round(-reach * forward[1], 1e-4)
+        ),
+    )
+
+
 def _view_on_table(cam: CameraDesc, table_z: float) -> np.ndarray:
     """Where the picture's four corners meet the table plane, (4, 2)."""
     f = cam.focal_px
