@@ -62,6 +62,12 @@ def _camera(
     )
     while highest_ray_z(cam) >= -0.02 and cam.tilt_deg > 0:  # a very wide lens: tilt less
         cam = dataclasses.replace(cam, tilt_deg=_round(cam.tilt_deg / 2, 0.01))
+    return _aimed_at_middle(cam, above)
+
+
+def _aimed_at_middle(cam: CameraDesc, above: float) -> CameraDesc:
+    """``cam`` moved across, ``above`` over the table, so that its optical axis meets the
+    table's middle."""
     forward = world_from_optical(cam)[:, 2]
     reach = above / -forward[2]
     return dataclasses.replace(
@@ -74,14 +80,7 @@ def looking_across(scene: SceneDesc, tilt_deg: float) -> SceneDesc:
     from the same height over the table and the same side, the optical axis still through the
     table's middle: the camera steps back to look at what it looked at before."""
     cam = dataclasses.replace(scene.camera, tilt_deg=tilt_deg)
-    forward = world_from_optical(cam)[:, 2]
-    reach = (cam.z - scene.table.z) / -forward[2]
-    return dataclasses.replace(
-        scene,
-        camera=dataclasses.replace(
-            cam, x=_round(-reach * forward[0], 1e-4), y=_round(-reach * forward[1], 1e-4)
-        ),
-    )
+    return dataclasses.replace(scene, camera=_aimed_at_middle(cam, cam.z - scene.table.z))
 
 
 def _view_on_table(cam: CameraDesc, table_z: float) -> np.ndarray:
