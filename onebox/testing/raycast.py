@@ -179,6 +179,16 @@ class Cylinder:
     colour: Rgb = (60, 120, 190)
 
 
+def lying(x: float, y: float, radius: float, length: float, yaw_deg: float) -> Cylinder:
+    """A cylinder lying on the plane z = 0 (a can or a roll on its side), its axis turned
+    ``yaw_deg`` from x."""
+    yaw = math.radians(yaw_deg)
+    axis = (math.cos(yaw), math.sin(yaw), 0.0)
+    side = (-math.sin(yaw), math.cos(yaw), 0.0)
+    rotation = tuple(zip(side, (0.0, 0.0, 1.0), axis, strict=True))
+    return Cylinder((x, y, radius), radius, length, rotation)  # type: ignore[arg-type]
+
+
 @dataclass(frozen=True)
 class Sphere:
     """A ball."""
