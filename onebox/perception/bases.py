@@ -264,9 +264,83 @@ def seen_under(
         through = (seen > z - margin).sum(axis=-1)  # boxes x levels
     looked = inside.sum(axis=-1)
     share = through / np.maximum(looked, 1)
+    # Under a box standing on a wide top, the support is hidden only where that top is solid
+    # down to it: under a table's top, or a pallet's, the camera sees the floor past its edge.
+    # (A clump on a clump is still looked through to the support.)
+    on_wide = np.array([_wide(b.stands_on) for b in boxes], dtype=bool)
+    share[on_wide, 1] = 0.0
     result[measured] = ((looked >= 0.5 * inside.shape[-1]) & (share >= SEEN_UNDER_SHARE)).any(
         axis=1
     )
+    return result
+
+
+OPEN_UNDER_FRACTIONS = np.linspace(-0.4, 0.4, 9)
+"""Where a top carrying boxes is looked under: a grid over all but its outer tenth each way,
+at :data:`OPEN_UNDER_LEVEL` of its height above its base..."""
+OPEN_UNDER_LEVEL = 0.2
+OPEN_UNDER_SIDE_RAYS = 4
+"""...where at least this many of the rays to the grid's points pass down past the top's sides
+(not through the top: those show nothing under it)..."""
+OPEN_UNDER_SHARE = 0.5
+"""...and this share of those rays sees past its point: a table's or a pallet's top on legs
+or blocks, not a box. A solid box's side face stops every one of them, nearer."""
+OPEN_UNDER_MIN_M = 0.3
+"""Only tops at least this wide are looked under so: a carton carrying a carton stays a box,
+its rectangle a centimetre off at most against 3 cm and more inside."""
+
+
+def _wide(top: Plateau | None) -> bool:
+    """Whether a box stands on a top at least :data:`OPEN_UNDER_MIN_M` wide."""
+    return top is not None and top.rect is not None and top.rect.width_m >= OPEN_UNDER_MIN_M
+
+
+def open_under(
+    boxes: list[Plateau], depth_m: Float32Array, lens: Intrinsics, support: Support
+) -> BoolArray:
+    """Per box, whether another box stands on it and the camera sees under it past its sides:
+    a table seen from the side, with the floor round it and under it. Looking straight down
+    no ray passes its sides, and this cannot tell. Only tops carrying boxes are looked under:
+    a clump afloat is :func:`seen_under`'s."""
+    result: BoolArray = np.zeros(len(boxes), dtype=bool)
+    carrying = {id(b.stands_on) for b in boxes if b.stands_on is not None}
+    cam = plane_basis(support, None)
+    rows_n, cols_n = depth_m.shape
+    height = support.offset_camera_m  # the camera's, over the support, at (0, 0) in the plane
+    grid = np.meshgrid(OPEN_UNDER_FRACTIONS, OPEN_UNDER_FRACTIONS)
+    f_len, f_wid = (f.reshape(-1, 1) for f in grid)
+    for i, box in enumerate(boxes):
+        rect = box.rect
+        if rect is None or id(box) not in carrying or rect.width_m < OPEN_UNDER_MIN_M:
+            continue
+        ax = np.asarray(rect.axis)
+        across = np.array([-ax[1], ax[0]])
+        middle = np.asarray(rect.middle)
+        flat = middle + f_len * rect.length_m * ax + f_wid * rect.width_m * across
+        # Above the top it stands on; or above the support, when its faces end on nothing seen
+        # (a table's top, its edge seen from the side, is a slab of a few centimetres).
+        base = box.base_m if box.stands_on is not None else 0.0
+        level = base + OPEN_UNDER_LEVEL * (box.height_m - base)
+        if not level < box.height_m < height:
+            continue
+        # Where each ray crosses the top's level: off the top, it passes down past a side.
+        crossing = flat * ((height - box.height_m) / (height - level)) - middle
+        side = (np.abs(crossing @ ax) > 0.5 * rect.length_m) | (
+            np.abs(crossing @ across) > 0.5 * rect.width_m
+        )
+        pts = flat[:, :1] * cam[0] + flat[:, 1:] * cam[1] + (level - height) * cam[2]
+        z = pts[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = np.rint(lens.fx * pts[:, 0] / z + lens.cx)
+            v = np.rint(lens.fy * pts[:, 1] / z + lens.cy)
+        side &= (z > 0) & (u >= 0) & (u < cols_n) & (v >= 0) & (v < rows_n)
+        if np.count_nonzero(side) < OPEN_UNDER_SIDE_RAYS:
+            continue
+        seen = depth_m[v[side].astype(np.intp), u[side].astype(np.intp)]
+        noise = np.maximum(3.0 * support.sigma_at(z[side]), LEVEL_TOLERANCE_FLOOR_M)
+        with np.errstate(invalid="ignore"):
+            past = np.count_nonzero(seen > z[side] + noise)
+        result[i] = past >= OPEN_UNDER_SHARE * np.count_nonzero(side)
     return result
 
 

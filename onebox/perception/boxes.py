@@ -225,6 +225,7 @@ def _read(
     bases.raise_to_faces(boxes, plateaus, depth, colour, lens, support, settings)
     bases.shadowed_sides(boxes, support.offset_camera_m, settings)
     afloat = bases.seen_under(boxes, depth, lens, support)
+    afloat |= bases.open_under(boxes, depth, lens, support)
     reported = [
         b
         for b, floats in zip(boxes, afloat, strict=True)

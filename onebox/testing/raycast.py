@@ -179,6 +179,23 @@ class Cylinder:
     colour: Rgb = (60, 120, 190)
 
 
+def table_on_legs(
+    size: tuple[float, float], height_m: float, yaw_deg: float = 0.0, top_m: float = 0.03
+) -> tuple[Box, ...]:
+    """A table on the plane z = 0, its middle over the origin: a top ``top_m`` thick whose
+    upper face is ``height_m`` up, on four legs 4 cm square set 2 cm in from its corners."""
+    top = box_on(Plane(), 0.0, 0.0, (*size, top_m), yaw_deg, (150, 140, 130))
+    top = dataclasses.replace(top, centre=(0.0, 0.0, height_m - top_m / 2))
+    yaw = math.radians(yaw_deg)
+    legs = []
+    for sx in (-1, 1):
+        for sy in (-1, 1):
+            x, y = sx * (size[0] / 2 - 0.04), sy * (size[1] / 2 - 0.04)
+            middle = (x * math.cos(yaw) - y * math.sin(yaw), x * math.sin(yaw) + y * math.cos(yaw))
+            legs.append(box_on(Plane(), *middle, (0.04, 0.04, height_m - top_m), yaw_deg))
+    return (top, *legs)
+
+
 def lying(x: float, y: float, radius: float, length: float, yaw_deg: float) -> Cylinder:
     """A cylinder lying on the plane z = 0 (a can or a roll on its side), its axis turned
     ``yaw_deg`` from x."""
