@@ -192,6 +192,7 @@ const within = (promise, ms) => Promise.race([promise, new Promise((_, no) => se
       nextShot = now + Number(shotEveryS) * 1000;
       try {
         const s = await within(cdp.send('Page.captureScreenshot', { format: 'png' }), 30000);
+        row.shot_done = (Date.now() - t0) / 1000;  // the picture is from between t and this
         row.shot = `${shots}/page_${String(n++).padStart(3, '0')}_${row.t.toFixed(0)}s.png`;
         fs.writeFileSync(row.shot, Buffer.from(s.data, 'base64'));
       } catch (e) { row.shot_error = String(e).slice(0, 200); }
@@ -448,7 +449,7 @@ def main() -> None:
                         f"  {sample.get('fps', 0):4.1f} fps  heap {(sample.get('heap') or 0) / 2**20:5.1f} MiB  wasm {(sample.get('wasm') or 0) / 2**20:5.0f} MiB"
                         f"  RSS {sample['rss']:6.0f} MiB (renderer {sample['renderer']:5.0f})"
                         + (
-                            f"  shot {Path(sample['shot']).name} colour {sample['fills']['colour']:.0%} depth {sample['fills']['depth']:.0%}{' WHOLE' if sample['whole'] else ''}"
+                            f"  shot {Path(sample['shot']).name} (taken by {sample['shot_done']:.1f} s) colour {sample['fills']['colour']:.0%} depth {sample['fills']['depth']:.0%}{' WHOLE' if sample['whole'] else ''}"
                             if sample.get("shot")
                             else ""
                         )
@@ -501,7 +502,11 @@ def summarise(
     whole = next((r for r in rows if r.get("whole")), None)
     print(
         "whole scene (pictures in both panels, no view reports) "
-        + (f"first in the screenshot at {whole['t']:.1f} s" if whole else "never")
+        + (
+            f"first in the screenshot at {whole['t']:.1f} s (taken by {whole['shot_done']:.1f} s)"
+            if whole
+            else "never"
+        )
     )
     print(
         f"the page dropped old data {len(gcs)} times"

@@ -122,6 +122,14 @@ def blueprint(camera: str = "camera") -> rrb.Blueprint:
                 eye_controls=rrb.EyeControls3D(
                     position=[0.36, -0.5, 0.42], look_target=[0.0, 0.02, 0.13], eye_up=[0, 0, 1]
                 ),
+                # The view's own endless grid is a full-view shader every frame: in a
+                # software-rendered browser it held an empty view to 1 to 2 frames a second
+                # (60 without it) and made the first frame with data seconds later. The
+                # table's 5 cm grid is the floor to read; the background, white, is one colour.
+                background=rrb.Background(
+                    kind=rrb.BackgroundKind.SolidColor, color=[255, 255, 255]
+                ),
+                line_grid=rrb.LineGrid3D(visible=False),
             ),
             rrb.Vertical(
                 rrb.Spatial2DView(name="colour", origin=f"{cam}/image", contents=["$origin/rgb"]),

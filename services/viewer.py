@@ -28,7 +28,9 @@ Where it shows them:
     draws, so every message costs;
   - --save FILE.rrd: a recording instead, which ``rerun FILE.rrd`` opens later (refused if it
     exists, unless --overwrite; nothing is left behind on failure).
-The layout is the seed's config/one_box.rviz: the 3D view beside the colour and depth pictures.
+The layout is the seed's config/one_box.rviz: the 3D view beside the colour and depth pictures;
+the 3D view on a plain white background without Rerun's endless grid (the table's grid is the
+floor), which a software-rendered page redrew at 1 to 2 frames a second with nothing else shown.
 
 Settings: viewer (environment VIEWER, config [viewer] viewer; the seed's rviz:=false). With
 ``VIEWER=false`` it logs "viewer off" and idles until stopped, so ``honcho start`` keeps the
