@@ -500,7 +500,7 @@ def find_bases(
     for j, level in enumerate(levels):
         if level is None:
             continue
-        if level.upright:
+        if level.upright or level.rounded:
             allowed[j] = False
             continue
         for i, box in enumerate(boxes):

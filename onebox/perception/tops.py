@@ -130,6 +130,9 @@ class Plateau:
     """Its plane fitted along the rays stands more than UPRIGHT_DEG from the support: a side
     face seen nearly edge-on through noise (its readings' spread within the tolerance), no
     level anything stands on."""
+    rounded: bool = False
+    """Its readings curve down toward its sides as a can's lying down, or a ball's (see
+    :func:`_rounded`): nothing stands on it."""
     hidden_band_m: float = 0.0
     """How far, along the support, what rises past the top's hidden outline stands off it
     (median over the hidden outline): a wall rising at the top's edge stands at it, a taller
@@ -997,6 +1000,7 @@ def _measure_all(
         mine = mine[:: max(1, len(mine) // 3_000)]
         mine_a, mine_b = _in_plane(basis, across[tops.cols[mine]], down[tops.rows[mine]], d[mine])
         if _rounded(mine_a, mine_b, h_flat[tops.flat[mine]], ax, float(tol[t])):
+            p.rounded = True
             continue
         p.is_box = True
     return plateaus
