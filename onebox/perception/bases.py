@@ -189,6 +189,19 @@ floats: no box stands there. A real box's rarely passes 0.5 (a box across a narr
 base not found); a floating clump's is 1 on some level."""
 
 
+def _pixels(
+    pts: Float64Array, lens: Intrinsics, shape: tuple[int, ...]
+) -> tuple[Float64Array, Float64Array, BoolArray]:
+    """The column and row of the pixel each optical-frame point falls in, and whether that is
+    in a picture of ``shape`` (rows, columns), in front of the camera."""
+    z = pts[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.rint(lens.fx * pts[..., 0] / z + lens.cx)
+        v = np.rint(lens.fy * pts[..., 1] / z + lens.cy)
+        inside = (z > 0) & (u >= 0) & (u < shape[1]) & (v >= 0) & (v < shape[0])
+    return u, v, inside
+
+
 def seen_under(
     boxes: list[Plateau], depth_m: Float32Array, lens: Intrinsics, support: Support
 ) -> BoolArray:
@@ -206,7 +219,6 @@ def seen_under(
     rects = [b.rect for b in boxes if b.rect is not None]
     if not rects:
         return result
-    rows_n, cols_n = depth_m.shape
     cam = plane_basis(support, None)
     middle = np.array([r.middle for r in rects])  # boxes x 2
     ax = np.array([r.axis for r in rects])
@@ -232,9 +244,8 @@ def seen_under(
         + (level - support.offset_camera_m)[:, :, np.newaxis, np.newaxis] * cam[2]
     )  # boxes x levels x samples x 3
     z = pts[..., 2]
+    u, v, inside = _pixels(pts, lens, depth_m.shape)
     with np.errstate(divide="ignore", invalid="ignore"):
-        u = np.rint(lens.fx * pts[..., 0] / z + lens.cx)
-        v = np.rint(lens.fy * pts[..., 1] / z + lens.cy)
         # Where the ray to the point enters the box, as a share of the way from the camera
         # (at (0, 0) on the plane, at height offset): the slabs' entries, the latest of them.
         camera = -middle[:, np.newaxis]  # boxes x 1 x 2, from the rectangle's middle
@@ -251,7 +262,6 @@ def seen_under(
         )
         enter = np.maximum(enter, near_h[..., np.newaxis])
         gap = (1.0 - np.clip(enter, 0.0, 1.0)) * z
-    inside = (z > 0) & (u >= 0) & (u < cols_n) & (v >= 0) & (v < rows_n)
     seen = np.where(
         inside,
         depth_m[np.where(inside, v, 0).astype(np.intp), np.where(inside, u, 0).astype(np.intp)],
@@ -305,7 +315,6 @@ def open_under(
     result: BoolArray = np.zeros(len(boxes), dtype=bool)
     carrying = {id(b.stands_on) for b in boxes if b.stands_on is not None}
     cam = plane_basis(support, None)
-    rows_n, cols_n = depth_m.shape
     height = support.offset_camera_m  # the camera's, over the support, at (0, 0) in the plane
     grid = np.meshgrid(OPEN_UNDER_FRACTIONS, OPEN_UNDER_FRACTIONS)
     f_len, f_wid = (f.reshape(-1, 1) for f in grid)
@@ -330,10 +339,8 @@ def open_under(
         )
         pts = flat[:, :1] * cam[0] + flat[:, 1:] * cam[1] + (level - height) * cam[2]
         z = pts[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            u = np.rint(lens.fx * pts[:, 0] / z + lens.cx)
-            v = np.rint(lens.fy * pts[:, 1] / z + lens.cy)
-        side &= (z > 0) & (u >= 0) & (u < cols_n) & (v >= 0) & (v < rows_n)
+        u, v, inside = _pixels(pts, lens, depth_m.shape)
+        side &= inside
         if np.count_nonzero(side) < OPEN_UNDER_SIDE_RAYS:
             continue
         seen = depth_m[v[side].astype(np.intp), u[side].astype(np.intp)]
@@ -467,7 +474,7 @@ def find_bases(
     """What each box stands on (see the module docstring, step 6)."""
     if not boxes:
         return
-    rows_n, cols_n = height_m.shape
+    cols_n = height_m.shape[1]
     cam = plane_basis(support, None)
     # Levels: the support, every top, and each box's ledge (a level of its own box only).
     ledged = [i for i, b in enumerate(boxes) if b.ledge_m is not None]
@@ -518,11 +525,7 @@ def find_bases(
         + pair_probes[..., 1:] * cam[1]
         + (level_h[pair_l].reshape(shape) - support.offset_camera_m) * cam[2]
     )
-    z = pts[..., 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = np.rint(lens.fx * pts[..., 0] / z + lens.cx)
-        v = np.rint(lens.fy * pts[..., 1] / z + lens.cy)
-        inside = (z > 0) & (u >= 0) & (u < cols_n) & (v >= 0) & (v < rows_n)
+    u, v, inside = _pixels(pts, lens, height_m.shape)
     ui = np.where(inside, u, 0).astype(np.intp)
     vi = np.where(inside, v, 0).astype(np.intp)
     seen_h = np.where(inside, height_m[vi, ui], np.nan)
