@@ -1988,16 +1988,19 @@ def _ends(values: Float64Array, trim: bool) -> tuple[float, float]:
     holes in a top adds outline points round each hole, far more than round the top: one in
     a hundred of those cut into a disc's few extreme points, and a can's lid through
     sigma 3-4 mm filled 0.86 of its square."""
-    k = min(len(values) // 100, STRAY_POINTS) if trim else 0
-    low, high = np.partition(values, (k, len(values) - 1 - k))[[k, len(values) - 1 - k]]
-    return float(low), float(high)
+    return _kth_ends(values, min(len(values) // 100, STRAY_POINTS) if trim else 0)
 
 
 def _spread(values: Float64Array) -> float:
     """From the 1st to the 99th percentile."""
-    k = len(values) // 100
+    low, high = _kth_ends(values, len(values) // 100)
+    return high - low
+
+
+def _kth_ends(values: Float64Array, k: int) -> tuple[float, float]:
+    """The k-th least and k-th greatest value (from 0)."""
     low, high = np.partition(values, (k, len(values) - 1 - k))[[k, len(values) - 1 - k]]
-    return float(high - low)
+    return float(low), float(high)
 
 
 def cross(a: Float64Array, b: Float64Array) -> Float64Array:
