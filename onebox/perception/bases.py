@@ -320,7 +320,7 @@ def open_under(
     f_len, f_wid = (f.reshape(-1, 1) for f in grid)
     for i, box in enumerate(boxes):
         rect = box.rect
-        if rect is None or id(box) not in carrying or rect.width_m < OPEN_UNDER_MIN_M:
+        if rect is None or id(box) not in carrying or not _wide(box):
             continue
         ax = np.asarray(rect.axis)
         across = np.array([-ax[1], ax[0]])
