@@ -53,28 +53,43 @@ PROBE_REACH = np.array([1.0, 2.0, 4.0, 7.0])
 out from the side: the box itself hides the nearest when the camera looks down past that side."""
 
 
-def _probes(box: Plateau) -> Float64Array:
-    """Lines of points in the support plane going out from each side of a box's rectangle,
-    5 lines a side (lines x reaches x 2). The first point is the side's foot, 1.5 footprints
-    and 1 mm out (a rim of a lower top a few pixels wide); then PROBE_REACH steps."""
-    assert box.rect is not None
-    rect = box.rect
-    ax = np.asarray(rect.axis)
-    perp = np.array([-ax[1], ax[0]])
-    step = max(0.008, 3.0 * box.footprint_m)
-    out = np.stack([ax, -ax, perp, -perp])  # sides x 2
-    along = np.stack([perp, perp, ax, ax])
-    half = np.array([rect.length_m, rect.length_m, rect.width_m, rect.width_m]) / 2
-    half_along = np.array([rect.width_m, rect.width_m, rect.length_m, rect.length_m]) / 2
+def _frames(boxes: list[Plateau]) -> tuple[Float64Array, Float64Array, Float64Array, Float64Array]:
+    """Per box its rectangle's middle (boxes x 2), its sides' outward normals (ax, -ax, perp,
+    -perp: boxes x 4 x 2), the directions along those sides (perp, perp, ax, ax) and its
+    length and width (boxes x 2)."""
+    rects = [box.rect for box in boxes if box.rect is not None]
+    assert len(rects) == len(boxes)
+    mid = np.array([rect.middle for rect in rects], dtype=np.float64).reshape(-1, 2)
+    ax = np.array([rect.axis for rect in rects], dtype=np.float64).reshape(-1, 2)
+    size = np.array([(r.length_m, r.width_m) for r in rects], dtype=np.float64).reshape(-1, 2)
+    perp = np.stack([-ax[:, 1], ax[:, 0]], axis=1)
+    out = np.stack([ax, -ax, perp, -perp], axis=1)
+    along = np.stack([perp, perp, ax, ax], axis=1)
+    return mid, out, along, size
+
+
+def _probes(boxes: list[Plateau]) -> Float64Array:
+    """Lines of points in the support plane going out from each side of each box's rectangle,
+    5 lines a side (boxes x lines x reaches x 2). The first point is the side's foot, 1.5
+    footprints and 1 mm out (a rim of a lower top a few pixels wide); then PROBE_REACH
+    steps."""
+    mid, out, along, size = _frames(boxes)
+    half = size[:, [0, 0, 1, 1], np.newaxis, np.newaxis] / 2  # out past each side
+    half_along = size[:, [1, 1, 0, 0], np.newaxis, np.newaxis] / 2
+    fractions = PROBE_FRACTIONS[np.newaxis, np.newaxis, :, np.newaxis]
     start = (
-        np.asarray(rect.middle)
-        + (out * half[:, np.newaxis])[:, np.newaxis, :]
-        + (2 * PROBE_FRACTIONS[np.newaxis, :, np.newaxis] * half_along[:, np.newaxis, np.newaxis])
-        * along[:, np.newaxis, :]
-    )  # sides x fractions x 2
-    reach = np.concatenate([[1.5 * box.footprint_m + 0.001], PROBE_REACH * step])
-    points = start[:, :, np.newaxis, :] + reach[:, np.newaxis] * out[:, np.newaxis, np.newaxis, :]
-    result: Float64Array = points.reshape(-1, len(reach), 2)
+        mid[:, np.newaxis, np.newaxis, :]
+        + out[:, :, np.newaxis, :] * half
+        + (2 * fractions * half_along) * along[:, :, np.newaxis, :]
+    )  # boxes x sides x fractions x 2
+    footprint = np.array([box.footprint_m for box in boxes], dtype=np.float64)[:, np.newaxis]
+    step = np.maximum(0.008, 3.0 * footprint)
+    reach = np.concatenate([1.5 * footprint + 0.001, PROBE_REACH * step], axis=1)
+    points = (
+        start[:, :, :, np.newaxis, :]
+        + reach[:, np.newaxis, np.newaxis, :, np.newaxis] * out[:, :, np.newaxis, np.newaxis, :]
+    )
+    result: Float64Array = points.reshape(len(boxes), -1, reach.shape[1], 2)
     return result
 
 
@@ -89,25 +104,25 @@ def _face_slant(boxes: list[Plateau], probes: Float64Array) -> Float64Array:
     """Per box, line and point of :func:`_probes`: how far under a point's level (per metre
     of the camera's height over it) the ray through it meets the box's side behind it, where
     the camera sees that side's face (inf where it does not)."""
-    sides = len(PROBE_FRACTIONS)
-    result = np.full(probes.shape[:3], np.inf)
-    for i, box in enumerate(boxes):
-        assert box.rect is not None
-        rect = box.rect
-        ax = np.asarray(rect.axis)
-        perp = np.array([-ax[1], ax[0]])
-        mid = np.asarray(rect.middle)
-        for k, out in enumerate((ax, -ax, perp, -perp)):
-            # The camera's distance out past the side, and each point's.
-            camera_out = _camera_out_m(rect, out)
-            lines = probes[i, k * sides : (k + 1) * sides]
-            point_out = (lines - mid) @ out - rect.half_extent(*out)
-            with np.errstate(divide="ignore"):
-                slant = point_out / (camera_out - point_out)
-            result[i, k * sides : (k + 1) * sides] = np.where(
-                (camera_out > point_out) & (point_out > 0), slant, np.inf
-            )
-    return result
+    mid, out, _, size = _frames(boxes)
+    ox, oy = out[..., 0], out[..., 1]  # boxes x sides
+    ax, ay = ox[:, :1], oy[:, :1]
+    # Each side's half extent along its outward normal (as Rectangle.half_extent), and the
+    # camera's distance out past it: the camera stands over the support's origin.
+    half = 0.5 * (
+        np.abs(size[:, :1] * (ax * ox + ay * oy)) + np.abs(size[:, 1:] * (ay * ox - ax * oy))
+    )
+    camera_out = -(mid[:, :1] * ox + mid[:, 1:] * oy) - half
+    lines = probes.reshape(len(boxes), 4, len(PROBE_FRACTIONS), -1, 2)
+    rel = lines - mid[:, np.newaxis, np.newaxis, np.newaxis, :]
+    o = out[:, :, np.newaxis, np.newaxis, :]
+    point_out = rel[..., 0] * o[..., 0] + rel[..., 1] * o[..., 1]
+    point_out -= half[..., np.newaxis, np.newaxis]
+    camera = camera_out[..., np.newaxis, np.newaxis]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slant = point_out / (camera - point_out)
+    result: Float64Array = np.where((camera > point_out) & (point_out > 0), slant, np.inf)
+    return result.reshape(probes.shape[:3])
 
 
 def shadowed_sides(boxes: list[Plateau], camera_height_m: float, settings: FinderSettings) -> None:
@@ -516,7 +531,7 @@ def find_bases(
     _own_faces(allowed, levels, boxes, height_m, labels_top, lens, support, cam)
     # Only the pairs (level, box) that may be the box's base are probed.
     pair_l, pair_b = np.nonzero(allowed)
-    probes = np.stack([_probes(box) for box in boxes])  # boxes x lines x reaches x 2
+    probes = _probes(boxes)  # boxes x lines x reaches x 2
     # Camera-frame probe points at each pair's level: a e1 + b e2 + (level - offset) n.
     shape = (-1, 1, 1, 1)
     pair_probes = probes[pair_b]

@@ -396,7 +396,7 @@ class _Reading:
         along: Float64Array,
         half_along: Float64Array,
     ) -> None:
-        self.depth = np.asarray(depth_m, dtype=np.float64)
+        self.depth = depth_m
         self.lens = lens
         self.basis = basis
         self.camera_height_m = camera_height_m
@@ -440,7 +440,7 @@ class _Reading:
         ui = np.where(inside, ui, 0).astype(np.intp)
         vi = np.where(inside, vi, 0).astype(np.intp)
         self.pixels = (vi, ui)
-        d = self.depth[vi, ui]
+        d = self.depth[vi, ui].astype(np.float64)
         with np.errstate(invalid="ignore"):
             seen = inside & np.isfinite(d) & (d > 0)
         across_r, down_r = lens.rays(cols_n, rows_n)

@@ -903,6 +903,9 @@ def _measure_all(
     reach = np.maximum(tol, FLAT_REACH_M)
     loose = _loose_groups(p_idx, p_top, p_h, level, reach, count)
     plateaus: list[Plateau] = []
+    # The tops that are boxes unless they are round, and their rectangles' axes.
+    candidates: list[Plateau] = []
+    axes: list[Float64Array] = []
     for t in range(count):
         if tops.counts[t] < 6:
             continue
@@ -994,15 +997,28 @@ def _measure_all(
             settings.max_curvature_growth
         ):
             continue
-        # A can lying down or a bottle's rounded top: its top is the part of its curve
-        # within the tolerance, flat enough for the moments' plane; the readings curve down.
-        mine = np.arange(int(tops.starts[t]), int(tops.starts[t] + tops.counts[t]))
-        mine = mine[:: max(1, len(mine) // 3_000)]
+        candidates.append(p)
+        axes.append(ax)
+    # A can lying down or a bottle's rounded top: its top is the part of its curve within
+    # the tolerance, flat enough for the moments' plane; the readings curve down.
+    if candidates:
+        labels = [p.label for p in candidates]
+        # Every k-th of each top's pixels, at most ~3000 a top.
+        picks = [
+            np.arange(int(tops.starts[t]), int(tops.starts[t] + tops.counts[t]))[
+                :: max(1, int(tops.counts[t]) // 3_000)
+            ]
+            for t in labels
+        ]
+        mine = np.concatenate(picks)
+        group = np.repeat(np.arange(len(picks)), [len(pick) for pick in picks])
         mine_a, mine_b = _in_plane(basis, across[tops.cols[mine]], down[tops.rows[mine]], d[mine])
-        if _rounded(mine_a, mine_b, h_flat[tops.flat[mine]], ax, float(tol[t])):
-            p.rounded = True
-            continue
-        p.is_box = True
+        rounded = _rounded(
+            mine_a, mine_b, h_flat[tops.flat[mine]], group, np.array(axes), tol[labels]
+        )
+        for p, is_round in zip(candidates, rounded, strict=True):
+            p.rounded = bool(is_round)
+            p.is_box = not is_round
     return plateaus
 
 
@@ -1910,49 +1926,93 @@ DOME_MIN_SLOPE = 0.45
 
 
 def _rounded(
-    a: Float64Array, b: Float64Array, height: Float32Array, axis: Float64Array, tol: float
-) -> bool:
-    """Whether a top's readings (plane coordinates ``a``, ``b`` and heights) curve down toward
-    its sides as a cylinder lying down does, or a ball (see :data:`ROUND_DROP_SHARE` and the
-    settings after it). The top of a can on its side is the strip of its curve within the
+    a: Float64Array,
+    b: Float64Array,
+    height: Float32Array,
+    group: npt.NDArray[np.intp],
+    axis: Float64Array,
+    tol: Float64Array,
+) -> BoolArray:
+    """Per top, whether its readings (plane coordinates ``a``, ``b`` and heights, top
+    ``group``, ascending) curve down toward its sides as a cylinder lying down does, or a ball
+    (see :data:`ROUND_DROP_SHARE` and the settings after it); ``axis`` (tops x 2) is each
+    rectangle's length. The top of a can on its side is the strip of its curve within the
     tolerance: flat enough for the moments' plane, and filling its rectangle.
 
-    Fitted as height = c0 + c1 u + c2 v + c3 u^2 + c4 v^2 (u across the rectangle, v along it,
-    from the middle): the drop below the middle at a side is -c (half the extent)^2, the slope
-    there -2 c (half the extent). A can's top, seen from 0.45-1.5 m through any of the noises,
-    drops 0.9 to 2.5 tolerances across at 19 to 75 standard errors, under 0.1 along."""
-    u = a * -axis[1] + b * axis[0]
-    v = a * axis[0] + b * axis[1]
+    Fitted as height = c0 + c1 u + c2 v + c3 u^2 + c4 v^2 (u across the rectangle, v along it;
+    the curves c3 and c4 are the same wherever u and v start), all tops at once by their
+    normal equations: the drop below the middle at a side is -c (half the extent)^2, the slope
+    there -2 c (half the extent). A can's top, seen
+    from 0.45-1.5 m through any of the noises, drops 0.9 to 2.5 tolerances across at 19 to 75
+    standard errors, under 0.1 along."""
+    count = len(axis)
+    result = np.zeros(count, dtype=bool)
     h = height.astype(np.float64)
     ok = np.isfinite(h)
-    if np.count_nonzero(ok) < 12:
-        return False
-    u, v, h = u[ok] - u[ok].mean(), v[ok] - v[ok].mean(), h[ok]
-    x = np.stack([np.ones_like(u), u, v, u * u, v * v], axis=1)
+    n = np.bincount(group[ok], minlength=count)
+    fit = n >= 12
+    ok &= fit[group]
+    if not fit.any():
+        return result
+    g, h = group[ok], h[ok]
+    filled = np.flatnonzero(fit)
+    ax0, ax1 = np.repeat(axis[:, 0], n * fit), np.repeat(axis[:, 1], n * fit)
+    # Readings x (1, u, v, u^2, v^2, h): the curves need no centring across or along; the
+    # heights are taken from their mean, for their sum of squares below.
+    m = np.empty((len(g), 6))
+    m[:, 0] = 1.0
+    u, v = m[:, 1], m[:, 2]
+    np.multiply(a[ok], -ax1, out=u)
+    u += b[ok] * ax0
+    np.multiply(a[ok], ax0, out=v)
+    v += b[ok] * ax1
+    np.multiply(u, u, out=m[:, 3])
+    np.multiply(v, v, out=m[:, 4])
+    m[:, 5] = h - (np.bincount(g, weights=h, minlength=count) / np.maximum(n, 1))[g]
+    # Per top M'M: the normal equations (and the heights' sum of squares) by one small
+    # product each.
+    bounds = np.searchsorted(g, np.arange(count + 1))
+    gram = np.zeros((count, 6, 6))
+    for t in filled:
+        rows = m[bounds[t] : bounds[t + 1]]
+        gram[t] = rows.T @ rows
+    normal, moment = gram[:, :5, :5], gram[:, :5, 5]
+    normal[~fit] = np.eye(5)
     try:
-        inverse = np.linalg.inv(x.T @ x)
+        inverse = np.linalg.inv(normal)
     except np.linalg.LinAlgError:
-        return False
-    coef = inverse @ (x.T @ h)
-    residual = h - x @ coef
-    variance = float(residual @ residual) / max(len(h) - 5, 1)
-    drop, slope, sure = [], [], []
-    for k, w in ((3, u), (4, v)):
-        half = 0.5 * float(np.ptp(w))
-        curve = -float(coef[k])
-        drop.append(curve * half * half / tol)
-        slope.append(2.0 * curve * half)
-        error = math.sqrt(max(float(inverse[k, k]) * variance, 0.0))
-        sure.append(curve >= ROUND_MIN_T * error)
-    lying = any(
-        drop[k] >= ROUND_DROP_SHARE
-        and slope[k] >= ROUND_MIN_SLOPE
-        and sure[k]
-        and abs(drop[1 - k]) < ROUND_LEVEL_SHARE
-        for k in (0, 1)
-    )
-    dome = all(drop[k] >= 1.0 and slope[k] >= DOME_MIN_SLOPE and sure[k] for k in (0, 1))
-    return lying or dome
+        inverse = np.zeros_like(normal)
+        for k in range(count):
+            try:
+                inverse[k] = np.linalg.inv(normal[k])
+            except np.linalg.LinAlgError:
+                fit[k] = False
+    coef = np.einsum("gij,gj->gi", inverse, moment)
+    # The residuals' sum of squares: h'h - c'X'h (heights taken from their mean).
+    squares = np.maximum(gram[:, 5, 5] - np.einsum("gi,gi->g", coef, moment), 0.0)
+    variance = squares / np.maximum(n - 5, 1)
+    starts = bounds[filled]
+    drop, slope = np.zeros((count, 2)), np.zeros((count, 2))
+    sure = np.zeros((count, 2), dtype=bool)
+    for k, w in enumerate((u, v)):
+        half = np.zeros(count)
+        half[filled] = 0.5 * (np.maximum.reduceat(w, starts) - np.minimum.reduceat(w, starts))
+        curve = -coef[:, 3 + k]
+        drop[:, k] = curve * half * half / tol
+        slope[:, k] = 2.0 * curve * half
+        error = np.sqrt(np.maximum(inverse[:, 3 + k, 3 + k] * variance, 0.0))
+        sure[:, k] = curve >= ROUND_MIN_T * error
+    lying = np.zeros(count, dtype=bool)
+    for k in (0, 1):
+        lying |= (
+            (drop[:, k] >= ROUND_DROP_SHARE)
+            & (slope[:, k] >= ROUND_MIN_SLOPE)
+            & sure[:, k]
+            & (np.abs(drop[:, 1 - k]) < ROUND_LEVEL_SHARE)
+        )
+    dome = np.all((drop >= 1.0) & (slope >= DOME_MIN_SLOPE) & sure, axis=1)
+    result[:] = fit & (lying | dome)
+    return result
 
 
 def _extent(values: Float64Array, footprint: float, trim: bool, straight: bool) -> float:
