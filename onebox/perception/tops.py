@@ -1916,10 +1916,13 @@ ROUND_MIN_T = 15.0
 """...with a curve this many standard errors clear of the readings' noise (the flat tops'
 curves: up to 11)..."""
 
-ROUND_LEVEL_SHARE = 0.5
-"""...and level the other way: falling by under this share of the tolerance (a cylinder
-lying down). A top that falls a whole tolerance both ways at :data:`DOME_MIN_SLOPE` is a
-ball's or a capsule's end; a carton's bulging lid falls both ways too, gently."""
+ROUND_LEVEL_SHARE = 0.7
+"""...and level the other way: falling or rising by under this share of the tolerance, or of
+the fall across, whichever is more (a cylinder lying down: depth noise correlated over a
+dozen pixels, as a stereo camera's or filtered depth's, bows a can's top 0.9 tolerances
+along while it falls 2.2 across). A top that falls a whole tolerance both ways at
+:data:`DOME_MIN_SLOPE` is a ball's or a capsule's end; a carton's bulging lid falls both ways
+alike, gently."""
 
 DOME_MIN_SLOPE = 0.45
 """The slope (24 degrees) at which a top falling a whole tolerance both ways is round."""
@@ -2008,7 +2011,7 @@ def _rounded(
             (drop[:, k] >= ROUND_DROP_SHARE)
             & (slope[:, k] >= ROUND_MIN_SLOPE)
             & sure[:, k]
-            & (np.abs(drop[:, 1 - k]) < ROUND_LEVEL_SHARE)
+            & (np.abs(drop[:, 1 - k]) < ROUND_LEVEL_SHARE * np.maximum(drop[:, k], 1.0))
         )
     dome = np.all((drop >= 1.0) & (slope >= DOME_MIN_SLOPE) & sure, axis=1)
     result[:] = fit & (lying | dome)

@@ -486,7 +486,10 @@ class Noise:
     - ``edge_hole_share``: share of pixels within ``edge_px`` of a depth edge that read nothing;
     - ``flying_share``: share of depth-edge pixels that read a mix of the two sides;
     - ``speckle_share``: share of pixels that read much nearer (0.3-0.9 of the truth), alone or
-      in clumps of up to ``speckle_clump_px`` across.
+      in clumps of up to ``speckle_clump_px`` across;
+    - ``correlation_px``: the gaussian and axial noise smoothed over this many pixels (a
+      Gaussian's sigma) and scaled back to its sigma, as a stereo camera's matching window
+      and a depth filter leave it: neighbours err together, in lumps.
     """
 
     sigma_m: float = 0.0
@@ -500,6 +503,7 @@ class Noise:
     flying_share: float = 0.0
     speckle_share: float = 0.0
     speckle_clump_px: int = 1
+    correlation_px: float = 0.0
 
     @classmethod
     def kinect(cls) -> Noise:
@@ -572,7 +576,11 @@ def add_noise(depth_m: Float32Array, noise: Noise, rng: np.random.Generator) -> 
     if noise.axial_a_m or noise.axial_b_per_m:
         sigma = np.hypot(sigma, noise.axial_a_m + noise.axial_b_per_m * (d - noise.axial_c_m) ** 2)
     if np.any(sigma > 0):
-        out = out + rng.standard_normal(d.shape) * np.where(valid, sigma, 0.0)
+        field = rng.standard_normal(d.shape)
+        if noise.correlation_px > 0:
+            field = ndimage.gaussian_filter(field, noise.correlation_px)
+            field /= field.std()
+        out = out + field * np.where(valid, sigma, 0.0)
     if noise.speckle_share > 0:
         seeds = rng.random(d.shape) < noise.speckle_share / max(noise.speckle_clump_px, 1) ** 1.0
         if noise.speckle_clump_px > 1:
