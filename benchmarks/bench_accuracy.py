@@ -9,7 +9,7 @@ hfov of 60 degrees unless told otherwise; random loaded pallets from seeds
 looked at across, 45 degrees from straight down
 (:func:`onebox.world.random_scene.looking_across`); scene/pallet.toml, scene/clutter.toml,
 the seed's world), renders colour and depth with MuJoCo, adds the depth
-noise, and runs the box finder the locator runs (``onebox.perception.boxes.BoxFinder``) on the
+noise (the presets, and a D435 whose errors come in lumps 3 pixels wide), and runs the box finder the locator runs (``onebox.perception.boxes.BoxFinder``) on the
 picture, the lens the sim publishes and the camera's pose, and judges what it finds against
 the ground truth (:mod:`onebox.testing.judged` says how: found, missed, false; a box partly
 hidden under another is judged on its height only).
@@ -43,6 +43,8 @@ from onebox.world.spec import SceneDesc
 SCENES = Path(__file__).resolve().parent.parent / "scene"
 ACROSS_TILT_DEG = 45.0
 """The random scenes once more, seen this far from straight down (a robot's head)."""
+LUMPY_D435 = replace(PRESETS["d435"], correlation_px=3.0)
+"""A D435 whose errors come in lumps 3 pixels wide (its matching window, a depth filter)."""
 
 
 @dataclass
@@ -131,6 +133,7 @@ def main() -> None:
         ("random, sigma 1 mm", None, NoiseSpec(model="gaussian", sigma_m=0.001)),
         ("random, d435", None, PRESETS["d435"]),
         ("random, azure_kinect", None, PRESETS["azure_kinect"]),
+        ("random, d435 lumpy (3 px)", None, LUMPY_D435),
         ("random looked at across, 45 degrees, noise-free", None, PRESETS["none"]),
         ("random looked at across, 45 degrees, d435", None, PRESETS["d435"]),
         ("random looked at across, 45 degrees, azure_kinect", None, PRESETS["azure_kinect"]),
@@ -148,8 +151,10 @@ def main() -> None:
         ),
         ("empty tables, d435", None, PRESETS["d435"]),
         ("empty tables, azure_kinect", None, PRESETS["azure_kinect"]),
+        ("empty tables, d435 lumpy (3 px)", None, LUMPY_D435),
         ("random pallets, noise-free", None, PRESETS["none"]),
         ("random pallets, d435", None, PRESETS["d435"]),
+        ("random pallets, d435 lumpy (3 px)", None, LUMPY_D435),
         ("random pallets taped, noise-free", None, PRESETS["none"]),
         ("random pallets taped, d435", None, PRESETS["d435"]),
         ("pallet, d435", [spec.load(SCENES / "pallet.toml")], PRESETS["d435"]),

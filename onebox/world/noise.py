@@ -18,6 +18,10 @@ The steps, each off at its zero value, in the order they are applied:
 - ``speckle_share``: that share of the picture replaced by wrong, much nearer readings
   (30-80 % of the true distance), alone or in square clumps up to ``clump_px`` across, as
   structured-light cameras give on dark or shiny spots.
+
+``correlation_px`` makes the normal error lumpy: the pool is smoothed once by a Gaussian of
+that sigma, in pixels, and scaled back to unit variance, so neighbours err together as behind
+a stereo camera's matching window or a depth filter, at the same sigma.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from scipy import ndimage
 
 from onebox.errors import SceneError
 
@@ -48,6 +53,7 @@ class NoiseSpec:
     flying_share: float = 0.0
     speckle_share: float = 0.0
     clump_px: int = 1
+    correlation_px: float = 0.0
     seed: int = 0
 
     @property
@@ -172,6 +178,14 @@ class DepthNoise:
             # A pool four pictures long, read from a random offset each capture (with a random
             # sign): one capture's errors are independent normals, at a tenth of the cost.
             self._normals = self._rng.standard_normal(4 * size, dtype=np.float32)
+            if spec.correlation_px > 0:
+                # Lumpy: smoothed as four pictures stacked (the edges wrap, so no border is
+                # smoother than the rest), read from a whole row's offset so that no seam runs
+                # down the picture.
+                pool = self._normals.reshape(4 * shape[0], shape[1])
+                pool = ndimage.gaussian_filter(pool, spec.correlation_px, mode="wrap")
+                pool /= pool.std()
+                self._normals = pool.reshape(-1)
 
     def apply(self, depth_m: Float32Array) -> Float32Array:
         """A noisy copy of ``depth_m`` (metres, NaN = no reading); the input is not changed."""
@@ -188,6 +202,8 @@ class DepthNoise:
             sigma += np.float32(spec.sigma_m + spec.a)
             size = out.size
             offset = int(self._rng.integers(0, self._normals.size - size + 1))
+            if spec.correlation_px > 0:
+                offset -= offset % out.shape[1]
             if self._rng.integers(2):
                 sigma *= np.float32(-1)
             sigma *= self._normals[offset : offset + size].reshape(out.shape)
