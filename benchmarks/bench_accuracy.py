@@ -3,16 +3,17 @@
     python benchmarks/bench_accuracy.py [--scenes 30] [--empty 50] [--pallets 30] [--seed 1]
         [--only NAME]
 
-Builds each world the way ``onebox sim`` does (random scenes from seeds, 640 x 480 with an
-hfov of 60 degrees unless told otherwise; random loaded pallets from seeds
+Builds each world the way ``onebox sim`` does (random scenes from seeds, 640 x 480 with an hfov
+of 60 degrees unless told otherwise; random loaded pallets from seeds
 (:func:`onebox.world.random_scene.random_pallet`), the same pallets taped; the random scenes
 looked at across, 45 degrees from straight down
-(:func:`onebox.world.random_scene.looking_across`); scene/pallet.toml, scene/clutter.toml,
-the seed's world), renders colour and depth with MuJoCo, adds the depth
-noise (the presets, and a D435 whose errors come in lumps 3 pixels wide), and runs the box finder the locator runs (``onebox.perception.boxes.BoxFinder``) on the
-picture, the lens the sim publishes and the camera's pose, and judges what it finds against
-the ground truth (:mod:`onebox.testing.judged` says how: found, missed, false; a box partly
-hidden under another is judged on its height only).
+(:func:`onebox.world.random_scene.looking_across`); scene/pallet.toml, scene/clutter.toml, the
+seed's world), renders colour and depth with MuJoCo, adds the depth noise (the presets, and a
+D435 whose errors come in lumps 3 pixels wide), and runs the box finder the locator runs
+(``onebox.perception.boxes.BoxFinder``) on the picture, the lens the sim publishes and the
+camera's pose, and judges what it finds against the ground truth (:mod:`onebox.testing.judged`
+says how: found, missed, false; a box partly hidden under another is judged on its height
+only).
 
 Prints, per case, median / p90 / worst of: the centre's error (mm, and as a share of the
 camera's distance), the yaw's (degrees, modulo the box's symmetry), length and width (mm,

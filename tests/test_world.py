@@ -15,6 +15,7 @@ from scipy.spatial.transform import Rotation
 
 from onebox.errors import SceneError
 from onebox.world import scene, spec
+from onebox.world.noise import PRESETS, DepthNoise
 from onebox.world.random_scene import looking_across, random_pallet, random_scene
 from onebox.world.render import Capture, SceneRenderer
 from onebox.world.spec import CameraDesc, SceneDesc, TableDesc
@@ -232,6 +233,7 @@ BAD = [
     ('[[object]]\nshape = "cone"\nx = 0\ny = 0\nsize = [0.1]\n', "object[0].shape"),
     ('[noise]\nmodel = "kinect"\n', "noise.model"),
     ('[noise]\nmodel = "gaussian"\nsigma = 0.01\n', "noise.sigma"),
+    ('[noise]\nmodel = "d435"\ncorrelation_px = -2\n', "noise.correlation_px"),
     ("[tabel]\nz = 0\n", "tabel"),
 ]
 
@@ -243,6 +245,20 @@ def test_a_bad_scene_is_one_line_naming_the_key(text: str, named: str) -> None:
         spec.parse(tomllib.loads(text), "bad.toml")
     message = str(e.value)
     assert named in message and message.startswith("bad.toml: ") and "\n" not in message
+
+
+def test_lumpy_noise_through_a_scene_file() -> None:
+    """``correlation_px`` in a scene's [noise] goes through a scene file and makes the sim's
+    depth error lumpy: neighbours err together."""
+    text = '[noise]\nmodel = "d435"\ncorrelation_px = 3\n[camera]\nwidth = 320\nheight = 240\n'
+    scene = spec.parse(tomllib.loads(text))
+    assert scene.noise.correlation_px == 3.0 and scene.noise.b == PRESETS["d435"].b
+    assert spec.parse(tomllib.loads(spec.dumps(scene))) == scene
+    clean = np.full((240, 320), 1.5, dtype=np.float32)
+    err = DepthNoise(scene.noise, clean.shape).apply(clean) - clean
+    left, right = err[:, :-1].ravel(), err[:, 1:].ravel()
+    normal = (np.abs(left) < 0.1) & (np.abs(right) < 0.1)  # not the speckles
+    assert np.corrcoef(left[normal], right[normal])[0, 1] > 0.9
 
 
 def test_taped_cartons_through_a_scene_file() -> None:
