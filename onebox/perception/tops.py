@@ -1945,18 +1945,16 @@ def _rounded(
     Fitted as height = c0 + c1 u + c2 v + c3 u^2 + c4 v^2 (u across the rectangle, v along it;
     the curves c3 and c4 are the same wherever u and v start), all tops at once by their
     normal equations: the drop below the middle at a side is -c (half the extent)^2, the slope
-    there -2 c (half the extent). A can's top, seen
-    from 0.45-1.5 m through any of the noises, drops 0.9 to 2.5 tolerances across at 19 to 75
-    standard errors, under 0.1 along."""
+    there -2 c (half the extent). A can's top, seen from 0.45-1.5 m through any of the noises,
+    drops 0.9 to 2.5 tolerances across at 19 to 75 standard errors, under 0.1 along."""
     count = len(axis)
-    result = np.zeros(count, dtype=bool)
     h = height.astype(np.float64)
     ok = np.isfinite(h)
     n = np.bincount(group[ok], minlength=count)
     fit = n >= 12
     ok &= fit[group]
     if not fit.any():
-        return result
+        return fit
     g, h = group[ok], h[ok]
     filled = np.flatnonzero(fit)
     ax0, ax1 = np.repeat(axis[:, 0], n * fit), np.repeat(axis[:, 1], n * fit)
@@ -2014,7 +2012,7 @@ def _rounded(
             & (np.abs(drop[:, 1 - k]) < ROUND_LEVEL_SHARE * np.maximum(drop[:, k], 1.0))
         )
     dome = np.all((drop >= 1.0) & (slope >= DOME_MIN_SLOPE) & sure, axis=1)
-    result[:] = fit & (lying | dome)
+    result: BoolArray = fit & (lying | dome)
     return result
 
 
