@@ -246,7 +246,8 @@ filter): neighbours err together, in lumps."""
 def round_things(tables: int = 30, noises: dict[str, Noise | None] = NOISES, how: str = "") -> None:
     """Tables with only round things on them (tins upright and lying, balls, bottles with
     rounded tops: 2-5 of them, 2-8 cm in radius), a camera 0.5-1.5 m up tilted up to 30
-    degrees, under five noises: every box found is a false one."""
+    degrees, under each of ``noises`` (the five of NOISES unless told): every box found is a
+    false one. ``how`` is added to the line's title."""
     rng = np.random.default_rng(5)
     false = dict.fromkeys(noises, 0)
     for _ in range(tables):
@@ -308,8 +309,9 @@ def _place(
 def desks(tables: int = 30, noises: dict[str, Noise | None] = NOISES, how: str = "") -> None:
     """Desks of 2-5 boxes (4-20 cm, 3-15 cm tall, any turn) among 2-4 round things (tins
     upright and lying, balls), none touching, a camera 0.6-1.5 m up tilted up to 30 degrees,
-    under five noises. Found and missed count the boxes whose top is all in the picture; false,
-    the boxes found where there is none (a box partly out of the picture is neither)."""
+    under each of ``noises`` (as :func:`round_things`). Found and missed count the boxes whose
+    top is all in the picture; false, the boxes found where there is none (a box partly out of
+    the picture is neither)."""
     rng = np.random.default_rng(3)
     counts = {name: [0, 0, 0] for name in noises}
     for _ in range(tables):
