@@ -16,10 +16,11 @@ module reads the picture at its size, fits the support and reports:
 0. Pictures larger than ``max_pixels`` (default 848 x 480: a D435's depth picture and an
    Azure Kinect's 640 x 576 are read whole) are read at every k-th pixel, the lens scaled
    exactly (1280 x 720 is read as 640 x 360).
-1. The support (:mod:`onebox.perception.support`): the lowest large plane facing up. Where
-   the depth noise there is 15 mm or more (a D435 past 2 m), steps 2 to 7 run twice: on the
-   picture, then on its 3 x 3 median (:func:`onebox.perception.segment.median3`, its noise
-   measured again against the plane), whose boxes are added where they share no room with
+1. The support (:mod:`onebox.perception.support`): the lowest large plane facing up, its noise
+   and how wide the noise's lumps are measured on it. Where the depth noise there is 15 mm or
+   more (a D435 past 2 m), steps 2 to 7 run twice: on the picture, then on its 3 x 3 median
+   (:func:`onebox.perception.segment.median3`, its noise and lumps measured again against the
+   plane), whose boxes are added where they share no room with
    one found already. Four sigma, the least step the finder trusts, was taller there than
    many a box; the median keeps edges and steps and cuts the noise about 2.4-fold, but read
    alone it lost bases and seams that the picture's own readings give.
@@ -47,7 +48,8 @@ module reads the picture at its size, fits the support and reports:
    again (a second look finds a seam that crosses one part only).
 5. Not a box: a top touching the picture's border (cut off), smaller than ``min_top_area_m2``
    (or (3 sigma)^2 where the depth is noisy), seen narrower than 1 cm, not parallel to the
-   support (a top narrower than its noise: by its plane along the rays, if it stands free),
+   support (a top narrower than its noise: by its plane along the rays, if it stands free;
+   a long top seen whole, within what the noise's lumps tilt a flat top of its size),
    not flat, filling less than ``min_score`` of its rectangle (a disc fills pi/4;
    under noise of 3 mm or more, a top seen whole by its hull; where a taller object in front
    hides part of the rectangle, of the part seen, if every side is seen along part of it and
@@ -104,7 +106,13 @@ import numpy.typing as npt
 
 from onebox.geometry import Intrinsics
 from onebox.perception import bases, segment, tops
-from onebox.perception.support import Support, fit_support, noise_against, support_holds
+from onebox.perception.support import (
+    Support,
+    fit_support,
+    lump_width,
+    noise_against,
+    support_holds,
+)
 from onebox.perception.tops import FinderSettings, Plateau
 
 __all__ = ["Box", "BoxFinder", "FinderSettings", "Found", "find_boxes"]
@@ -189,6 +197,7 @@ def find_boxes(
     if settings.noise_sigma_m is None and support.sigma_m > SMOOTH_SIGMA_M:
         smooth = segment.median3(depth)
         calmer = replace(support, sigma_m=noise_against(smooth, lens, support))
+        calmer = replace(calmer, lump_px=lump_width(smooth, lens, calmer))
         more = _read(smooth, lens, camera_to_world, colour, settings, calmer)
         boxes = _together(boxes, more, support)
     return Found(support, boxes, frame)

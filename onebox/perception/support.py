@@ -9,7 +9,8 @@ How:
 - A grid sample of at most ``SAMPLE_POINTS`` readings becomes optical-frame points.
 - RANSAC (all hypotheses evaluated at once, whole-array) with an inlier threshold that grows
   with distance like stereo noise (sigma ~ z^2); then least squares on the inliers, the noise
-  estimated from their residuals (MAD), the inliers taken again at 3 sigma(z) and refitted.
+  estimated from their residuals (MAD), the inliers taken again at 3 sigma(z) and refitted;
+  how wide the noise's lumps are, from how alike neighbours' residuals are (:func:`lump_width`).
 - With a pose only planes within ``max_tilt_deg`` of world up count; without one the largest
   plane sets "up". Up to three planes are found in turn; among those holding at least
   ``MIN_SHARE`` of the readings and facing the same way the LOWEST is the support (the floor
@@ -25,7 +26,7 @@ The plane is ``normal . p + offset_m = 0`` with the normal pointing up, toward t
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -42,6 +43,9 @@ HYPOTHESES = 64
 """RANSAC planes tried per round; with half the readings on the plane, P(miss) ~ 1e-4."""
 MIN_SHARE = 0.10
 """A plane holding less than this share of the readings is not a support candidate."""
+MAX_LUMP_PX = 8.0
+"""The widest lumps measured: past this a plane's residuals tell little more (a wave, a
+quantisation step held flat over many pixels)."""
 SIGMA_FLOOR_M = 0.0002
 """The least noise assumed (float32 depth at a metre is good to ~0.1 micrometre; a renderer's
 depth to ~0.1 mm): thresholds never shrink below a few tenths of a millimetre."""
@@ -56,6 +60,7 @@ class Support:
     (None without a pose). ``sigma_m`` is the depth noise at ``distance_m`` (the median
     distance of the plane's readings); noise elsewhere is taken to grow as distance squared.
     ``normal_camera`` and ``offset_camera_m`` are the same plane in the optical frame.
+    ``lump_px`` says how far apart readings still err together.
     """
 
     normal: tuple[float, float, float]
@@ -67,6 +72,10 @@ class Support:
     distance_m: float = 1.0
     normal_camera: tuple[float, float, float] = (0.0, 0.0, -1.0)
     offset_camera_m: float = 1.0
+    lump_px: float = 0.0
+    """How many pixels wide the depth errors' lumps are (0: every pixel errs on its own): the
+    width of the Gaussian that makes the plane's residuals as alike between neighbours as they
+    are (:func:`lump_width`). A stereo camera's matching window and depth filters make lumps."""
 
     def sigma_at(self, depth_m: npt.NDArray[np.floating] | float) -> npt.NDArray[np.float32]:
         """The depth noise expected at these distances, metres (never below the floor)."""
@@ -239,7 +248,8 @@ def fit_support(
                 distance, sigma = float(np.median(points[:, 2])), noise_sigma_m or SIGMA_FLOOR_M
         else:
             share, distance, sigma = 0.0, 1.0, noise_sigma_m or SIGMA_FLOOR_M
-        return support_from_plane(normal_c, offset_c, camera_to_world, share, sigma, distance)
+        support = support_from_plane(normal_c, offset_c, camera_to_world, share, sigma, distance)
+        return replace(support, lump_px=lump_width(depth_m, lens, support))
     if len(points) < 30:
         return None
     rng = np.random.default_rng(seed)
@@ -275,7 +285,8 @@ def fit_support(
     assert up is not None
     # The lowest: the plane farthest below the camera along "up".
     normal, offset, share, sigma, distance = max(candidates, key=lambda c: c[1] * float(c[0] @ up))
-    return support_from_plane(normal, offset, camera_to_world, share, sigma, distance)
+    support = support_from_plane(normal, offset, camera_to_world, share, sigma, distance)
+    return replace(support, lump_px=lump_width(depth_m, lens, support))
 
 
 def noise_against(depth_m: Float32Array, lens: Intrinsics, support: Support) -> float:
@@ -290,6 +301,54 @@ def noise_against(depth_m: Float32Array, lens: Intrinsics, support: Support) -> 
         return support.sigma_m
     scaled = residual[near] / (d[near] / support.distance_m) ** 2
     return max(1.4826 * float(np.median(np.abs(scaled - np.median(scaled)))), SIGMA_FLOOR_M)
+
+
+def lump_width(depth_m: Float32Array, lens: Intrinsics, support: Support) -> float:
+    """How many pixels wide the depth errors' lumps are on the support: the sigma of a
+    Gaussian that, smoothing independent errors, makes neighbours one pixel apart correlate as
+    the plane's residuals do. Neighbours' differences and the residuals are measured on the
+    same readings (grid-sample pixels near the plane and the pixel right of and below each),
+    by their medians, so speckles and boxes do not count; 0 when neighbours hardly correlate.
+
+    Correlation rho at one pixel, for errors smoothed by a Gaussian of sigma s, is
+    exp(-1 / (4 s^2)); the differences' variance is 2 sigma^2 (1 - rho)."""
+    height, width = depth_m.shape
+    points, flat = _sample(depth_m, lens)
+    if len(points) < 30:
+        return 0.0
+    normal = np.asarray(support.normal_camera)
+    d = points[:, 2]
+    residual = points @ normal + support.offset_camera_m
+    sigma = np.maximum(3.0 * support.sigma_at(d), 3.0 * SIGMA_FLOOR_M)
+    rows, cols = np.divmod(flat, width)
+    near = (np.abs(residual) < sigma) & (rows < height - 1) & (cols < width - 1)
+    across, down = lens.rays(width, height)
+    own, apart = [], []
+    for dr, dc in ((0, 1), (1, 0)):
+        r, c = rows[near] + dr, cols[near] + dc
+        nd = depth_m[r, c].astype(np.float64)
+        with np.errstate(invalid="ignore"):
+            ok = (nd > 0) & (nd < np.inf)
+        other = normal[0] * across[c] * nd + normal[1] * down[r] * nd + normal[2] * nd
+        other += support.offset_camera_m
+        scale = (support.distance_m / d[near]) ** 2
+        res = residual[near] * scale
+        other *= scale
+        own.append(res[ok])
+        apart.append((other - residual[near] * scale)[ok])
+    res_all, diff = np.concatenate(own), np.concatenate(apart)
+    if len(diff) < 30:
+        return 0.0
+    spread = float(np.median(np.abs(res_all - np.median(res_all))))
+    step = float(np.median(np.abs(diff - np.median(diff))))
+    if spread <= 0.0:
+        return 0.0
+    rho = 1.0 - 0.5 * (step / spread) ** 2
+    if rho <= 0.05:
+        return 0.0
+    if rho >= 1.0:
+        return MAX_LUMP_PX
+    return min(0.5 / math.sqrt(-math.log(rho)), MAX_LUMP_PX)
 
 
 def support_holds(

@@ -715,19 +715,85 @@ def _tilts(
     return result
 
 
+def _correlation(n: int, lump_px: float) -> Float64Array:
+    """Correlation at 0 .. n - 1 pixels of errors smoothed by a Gaussian of ``lump_px``."""
+    lags = np.arange(n, dtype=np.float64)
+    result: Float64Array = (
+        np.exp(-lags * lags / (4.0 * lump_px * lump_px))
+        if lump_px > 0
+        else (lags == 0).astype(np.float64)
+    )
+    return result
+
+
+@functools.lru_cache(maxsize=4096)
+def _slope_variance(n: int, lump_px: float) -> float:
+    """The variance of the least-squares slope (per pixel) through n >= 2 pixels in a row
+    whose errors, sigma 1, correlate as :func:`_correlation` says: 12 / (n^3 - n) for
+    independent errors; for lumps wider than the row, the slope of one lump."""
+    rho = _correlation(n, lump_px)
+    x = np.arange(n) - 0.5 * (n - 1)
+    auto = np.correlate(x, x, "full")[n - 1 :]
+    spread = float(auto[0])
+    return (spread + 2.0 * float(rho[1:] @ auto[1:])) / (spread * spread)
+
+
+@functools.lru_cache(maxsize=4096)
+def _mean_variance(n: int, lump_px: float) -> float:
+    """The variance of the mean of n pixels in a row (errors as in :func:`_slope_variance`):
+    1 / n for independent errors; for lumps wider than the row, 1."""
+    rho = _correlation(n, lump_px)
+    return (n + 2.0 * float(rho[1:] @ (n - np.arange(1, n)))) / (n * n)
+
+
+def noise_tilt_deg(
+    length_px: float, width_px: float, sigma_m: float, footprint_m: float, lump_px: float
+) -> float:
+    """How far, degrees, depth noise alone tilts the plane fitted to a flat top of
+    ``length_px`` x ``width_px`` pixels (``footprint_m`` apart) ``TILT_NOISE_SIGMAS`` times in
+    a thousand: its slope along each side is the slope of a row of readings, averaged over the
+    rows. Lumps (:attr:`Support.lump_px`) tilt a top narrower than them as a whole, and leave
+    a wider one fewer independent readings to average."""
+    variance = 0.0
+    for along, across in ((length_px, width_px), (width_px, length_px)):
+        lump = round(lump_px, 1)
+        slope = _slope_variance(max(2, min(round(along), MAX_NOISE_ROW_PX)), lump)
+        variance += slope * _mean_variance(max(1, min(round(across), MAX_NOISE_ROW_PX)), lump)
+    spread = TILT_NOISE_SIGMAS * sigma_m * math.sqrt(variance) / max(footprint_m, 1e-9)
+    return math.degrees(math.atan(spread))
+
+
 def _level(
-    tilt: float, ray_tilt: float, rising: float, rect: Rectangle, settings: FinderSettings
+    tilt: float,
+    ray_tilt: float,
+    rising: float,
+    rect: Rectangle,
+    settings: FinderSettings,
+    noise_deg: float = 0.0,
 ) -> bool:
     """Whether a top lies parallel to the support: by its moments' least axis, or, for a top
     narrower than its depth noise (whose least axis turns across it), by its plane fitted
     along the rays when at least three of its sides are seen falling away (edges, or the
     dropout a stereo camera leaves at them): a box standing free, not the strip of a lower top
-    seen past a box on it, nor a pallet's margin, which a rising face bounds."""
+    seen past a box on it, nor a pallet's margin, which a rising face bounds.
+
+    A long top seen whole, nothing rising past it, may be tilted by either as much as the
+    depth noise tilts a flat top of its size (``noise_deg``, :func:`noise_tilt_deg`): a stereo
+    camera's lumps tilt a narrow top far off 2 m away. Not a squarish one: a ball's or a
+    standing can's round top is cut unevenly by the tolerance and tilts as far, its dome
+    hidden in the lumps."""
     limit = settings.max_top_tilt_deg
     if tilt <= limit:
         return True
     falling = set(rect.edge_normals) | set(rect.dropout_normals)
-    return ray_tilt <= limit and len(falling) >= 3 and rising < RISING_SHARE
+    if ray_tilt <= limit and len(falling) >= 3 and rising < RISING_SHARE:
+        return True
+    return (
+        rect.hidden_sides == 0
+        and rising < RISING_SHARE
+        and rect.length_m >= LONG_ASPECT * rect.width_m
+        and min(tilt, ray_tilt) <= noise_deg
+    )
 
 
 def _measure_all(
@@ -989,7 +1055,18 @@ def _measure_all(
             fill = max(fill, seen)
         p.score = fill * flatness
         rising = float(risen_far[part].mean()) if part.stop > part.start else 0.0
-        if p.score < settings.min_score or not _level(tilt[t], ray_tilt[t], rising, rect, settings):
+        if p.score < settings.min_score:
+            continue
+        noise_deg = 0.0
+        if tilt[t] > settings.max_top_tilt_deg and rect.length_m >= LONG_ASPECT * rect.width_m:
+            noise_deg = noise_tilt_deg(
+                rect.length_m / footprint[t],
+                rect.width_m / footprint[t],
+                float(sigma[t]),
+                float(footprint[t]),
+                support.lump_px,
+            )
+        if not _level(tilt[t], ray_tilt[t], rising, rect, settings, noise_deg):
             continue
         # Curved tops widen when the tolerance is loosened; a box's sides drop straight down.
         wide = loose[t]
@@ -1737,6 +1814,14 @@ def _seen_fill(
     return min(whole_area_m2 / seen_m2, 1.0)
 
 
+TILT_NOISE_SIGMAS = 3.0
+"""A top is level while tilted less than three standard deviations of what the depth noise
+alone tilts a flat top of its size (:func:`noise_tilt_deg`)."""
+LONG_ASPECT = 1.5
+"""A top this many times as long as wide is no ball's nor standing can's (:func:`_level`)."""
+MAX_NOISE_ROW_PX = 400
+"""Rows longer than this count as this long in :func:`noise_tilt_deg` (the tilt is then far
+under any limit)."""
 UPRIGHT_DEG = 60.0
 """A piece whose plane along the rays stands this far from the support is a face, no level
 (:attr:`Plateau.upright`)."""
