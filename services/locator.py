@@ -85,6 +85,8 @@ COLOUR_WAIT_S = 0.05
 POSE_WAIT_S = 3.0
 """How long after starting a picture with no transform to world_frame is dropped (tf_static
 is on its way) before the locator settles for the camera's own frame."""
+LUMPY_PX = 0.5
+"""Lumps narrower than this (pixels) are not mentioned: the errors are all but independent."""
 
 
 def optional_metres(text: str) -> float | None:
@@ -806,7 +808,10 @@ def describe_support(found: Found, frame: str) -> str:
     n = support.normal
     where = f"surface {-support.offset_m:+.3f} m along ({n[0]:+.2f}, {n[1]:+.2f}, {n[2]:+.2f})"
     tilt = f", {support.tilt_deg:.1f} deg from level" if support.tilt_deg is not None else ""
-    return f"{where} in {frame}{tilt}"
+    noise = f", depth noise {1000 * support.sigma_m:.1f} mm at {support.distance_m:.2f} m"
+    if support.lump_px >= LUMPY_PX:
+        noise += f" in lumps {support.lump_px:.1f} px wide"
+    return f"{where} in {frame}{tilt}{noise}"
 
 
 def main(args: argparse.Namespace) -> int:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import re
 import time
+from dataclasses import replace
 
 import msgspec
 import numpy as np
@@ -11,6 +12,8 @@ import pytest
 
 from onebox import bus
 from onebox.geometry import FrameTree, matrix_of
+from onebox.perception.boxes import Found
+from onebox.perception.support import Support
 from onebox.sync import StampMatcher
 from onebox.testing.capture import CAPTURE
 from onebox.testing.processes import Inbox, Output, has_key
@@ -32,7 +35,7 @@ from schemas import (
     TransformStamped,
     codec,
 )
-from services.locator import ColourCache
+from services.locator import ColourCache, describe_support
 
 SEED_LINE = "box: middle (+0.064, +0.040) m, height 0.060 m, from 2,401 points on its top"
 BOX_LINE = (
@@ -247,6 +250,20 @@ def test_no_box_gives_an_empty_array_and_the_no_box_line(locators, test_bus, inb
     array = camera.until_measured(inbox)
     assert array.detections == [] and array.header.frame_id == "world"
     output.wait_for("no box in view")
+
+
+def test_the_surface_line_says_how_noisy_the_depth_is():
+    """The surface in the log says the depth noise the finder measured on it and, where the
+    errors come in lumps (a stereo camera's), how wide: what tells a user why a far box is
+    lost. Independent errors get no word on lumps."""
+    plane = Support((0.0, 0.0, 1.0), -0.7, 0.8, 1.2, "world", sigma_m=0.0041, distance_m=1.5)
+    lumpy = describe_support(Found(replace(plane, lump_px=2.84), [], "world"), "world")
+    assert lumpy == (
+        "surface +0.700 m along (+0.00, +0.00, +1.00) in world, 1.2 deg from level, "
+        "depth noise 4.1 mm at 1.50 m in lumps 2.8 px wide"
+    )
+    alone = describe_support(Found(replace(plane, lump_px=0.2), [], "world"), "world")
+    assert alone.endswith("depth noise 4.1 mm at 1.50 m")
 
 
 def test_every_bad_input_is_reported_and_the_locator_keeps_measuring(locators, test_bus, inbox):
