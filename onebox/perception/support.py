@@ -319,23 +319,24 @@ def lump_width(depth_m: Float32Array, lens: Intrinsics, support: Support) -> flo
     normal = np.asarray(support.normal_camera)
     d = points[:, 2]
     residual = points @ normal + support.offset_camera_m
-    sigma = np.maximum(3.0 * support.sigma_at(d), 3.0 * SIGMA_FLOOR_M)
+    reach = np.maximum(3.0 * support.sigma_at(d), 3.0 * SIGMA_FLOOR_M)
     rows, cols = np.divmod(flat, width)
-    near = (np.abs(residual) < sigma) & (rows < height - 1) & (cols < width - 1)
+    near = (np.abs(residual) < reach) & (rows < height - 1) & (cols < width - 1)
+    rows, cols = rows[near], cols[near]
+    # Residuals scaled to the noise at distance_m, as sigma_m is (noise grows as z^2).
+    scale = (support.distance_m / d[near]) ** 2
+    own_all = residual[near] * scale
     across, down = lens.rays(width, height)
     own, apart = [], []
     for dr, dc in ((0, 1), (1, 0)):
-        r, c = rows[near] + dr, cols[near] + dc
+        r, c = rows + dr, cols + dc
         nd = depth_m[r, c].astype(np.float64)
         with np.errstate(invalid="ignore"):
             ok = (nd > 0) & (nd < np.inf)
         other = normal[0] * across[c] * nd + normal[1] * down[r] * nd + normal[2] * nd
         other += support.offset_camera_m
-        scale = (support.distance_m / d[near]) ** 2
-        res = residual[near] * scale
-        other *= scale
-        own.append(res[ok])
-        apart.append((other - residual[near] * scale)[ok])
+        own.append(own_all[ok])
+        apart.append((other * scale - own_all)[ok])
     res_all, diff = np.concatenate(own), np.concatenate(apart)
     if len(diff) < 30:
         return 0.0

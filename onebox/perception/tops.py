@@ -749,14 +749,14 @@ def _mean_variance(n: int, lump_px: float) -> float:
 def noise_tilt_deg(
     length_px: float, width_px: float, sigma_m: float, footprint_m: float, lump_px: float
 ) -> float:
-    """How far, degrees, depth noise alone tilts the plane fitted to a flat top of
-    ``length_px`` x ``width_px`` pixels (``footprint_m`` apart) ``TILT_NOISE_SIGMAS`` times in
-    a thousand: its slope along each side is the slope of a row of readings, averaged over the
-    rows. Lumps (:attr:`Support.lump_px`) tilt a top narrower than them as a whole, and leave
-    a wider one fewer independent readings to average."""
+    """How far, degrees, depth noise of ``sigma_m`` may tilt the plane fitted to a flat top of
+    ``length_px`` x ``width_px`` pixels (``footprint_m`` apart): ``TILT_NOISE_SIGMAS``
+    standard deviations of the tilt it gives. The slope along each side is the slope of a row
+    of readings, averaged over the rows. Lumps (:attr:`Support.lump_px`) tilt a top narrower
+    than them as a whole, and leave a wider one fewer independent readings to average."""
     variance = 0.0
+    lump = round(lump_px, 1)
     for along, across in ((length_px, width_px), (width_px, length_px)):
-        lump = round(lump_px, 1)
         slope = _slope_variance(max(2, min(round(along), MAX_NOISE_ROW_PX)), lump)
         variance += slope * _mean_variance(max(1, min(round(across), MAX_NOISE_ROW_PX)), lump)
     spread = TILT_NOISE_SIGMAS * sigma_m * math.sqrt(variance) / max(footprint_m, 1e-9)
@@ -1058,7 +1058,7 @@ def _measure_all(
         if p.score < settings.min_score:
             continue
         noise_deg = 0.0
-        if tilt[t] > settings.max_top_tilt_deg and rect.length_m >= LONG_ASPECT * rect.width_m:
+        if tilt[t] > settings.max_top_tilt_deg:
             noise_deg = noise_tilt_deg(
                 rect.length_m / footprint[t],
                 rect.width_m / footprint[t],
