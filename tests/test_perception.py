@@ -275,14 +275,20 @@ def test_bottles_round_tops_are_not_boxes():
 
 
 @pytest.mark.parametrize("noise", ["noise-free", "d435"])
-@pytest.mark.parametrize("view", [(1.2, 25.0), (1.5, 35.0)], ids=["1.2 m, 25 deg", "1.5 m, 35 deg"])
+@pytest.mark.parametrize(
+    "view",
+    [(1.2, 25.0), (1.5, 35.0), (1.0, 20.0), (1.0, 0.0)],
+    ids=["1.2 m, 25 deg", "1.5 m, 35 deg", "1.0 m, 20 deg", "1.0 m, straight down"],
+)
 def test_boxes_on_a_table_with_the_floor_round_it(view, noise):
-    """A table 0.6 m high on legs, the floor round it, a camera 1.2-1.5 m over it tilted
-    25-35 degrees: the floor is the support, and three boxes stand on the table's top. The
+    """A table 0.6 m high on legs, the floor round it, a camera 1.0-1.5 m over it tilted
+    0-35 degrees: the floor is the support, and three boxes stand on the table's top. The
     camera sees the floor under the table past its near edge; the finder before took that for
     seeing through the boxes at the table's side (they floated: 1 of 3 found at 35 degrees)
     and reported the table as a box 0.8 x 0.6 x 0.6 m. The boxes are found, measured from the
-    table's top, and the table, seen under past its sides, is no box."""
+    table's top, and the table is no box: seen under past its sides (at 20 degrees only a strip
+    a few centimetres deep under its near edge shows, and it was reported), or seen from over
+    its top, where no ray passes its sides and a top so high carrying boxes is a table's."""
     height_m, tilt = view
     table = table_on_legs((0.8, 0.6), 0.6, 10.0)
     top = Plane((0.0, 0.0, 0.6))
@@ -299,6 +305,26 @@ def test_boxes_on_a_table_with_the_floor_round_it(view, noise):
     assert found.support is not None and abs(found.support.offset_m) < 0.01
     assert len(found.boxes) == len(boxes), [b.size for b in found.boxes]
     for box, true in match(found.boxes, boxes):
+        assert math.dist(box.centre, true.centre) < 0.01
+        assert box.size[2] == pytest.approx(true.size[2], abs=0.005)
+
+
+@pytest.mark.parametrize(
+    ("crate", "tilt_deg"),
+    [((0.5, 0.4, 0.6), 30.0), ((0.5, 0.4, 0.3), 30.0), ((0.5, 0.4, 0.3), 0.0)],
+    ids=["tall, from the side", "low, from the side", "low, straight down"],
+)
+def test_a_crate_carrying_a_box_is_a_box(crate, tilt_deg):
+    """A solid crate as wide as a small table, carrying a box: from the side its face stops
+    the rays that pass down past its top, and it is a box; straight down, lower than a table,
+    it is a box too. Both are found, the box measured from the crate's top."""
+    camera = Camera.tilted(1.0, tilt_deg, target=(0.0, 0.0, crate[2]), width=640, height=480)
+    under = box_on(Plane(), 0.0, 0.0, crate, 15.0, (170, 130, 90))
+    on_it = box_on(under, 0.05, 0.03, (0.16, 0.1, 0.08), 40.0, (60, 90, 200))
+    depth, colour = render(Scene(camera, Plane(), (under, on_it)))
+    found = find_boxes(depth, camera.lens, camera.camera_to_world, colour)
+    assert len(found.boxes) == 2, [b.size for b in found.boxes]
+    for box, true in match(found.boxes, (under, on_it)):
         assert math.dist(box.centre, true.centre) < 0.01
         assert box.size[2] == pytest.approx(true.size[2], abs=0.005)
 

@@ -300,19 +300,28 @@ def seen_under(
     return result
 
 
-OPEN_UNDER_FRACTIONS = np.linspace(-0.4, 0.4, 9)
-"""Where a top carrying boxes is looked under: a grid over all but its outer tenth each way,
-at :data:`OPEN_UNDER_LEVEL` of its height above its base..."""
-OPEN_UNDER_LEVEL = 0.2
-OPEN_UNDER_SIDE_RAYS = 4
-"""...where at least this many of the rays to the grid's points pass down past the top's sides
-(not through the top: those show nothing under it)..."""
-OPEN_UNDER_SHARE = 0.5
-"""...and this share of those rays sees past its point: a table's or a pallet's top on legs
-or blocks, not a box. A solid box's side face stops every one of them, nearer."""
 OPEN_UNDER_MIN_M = 0.3
-"""Only tops at least this wide are looked under so: a carton carrying a carton stays a box,
-its rectangle a centimetre off at most against 3 cm and more inside."""
+"""Only tops at least this wide are looked under: a carton carrying a carton stays a box, its
+rectangle a centimetre off at most against the strip of floor seen under a table."""
+OPEN_UNDER_SIDE_RAYS = 20
+"""A top carrying boxes is looked under along the rays that pass down past its sides into its
+footprint (a solid box's side face stops each of them): at least this many readings of them..."""
+OPEN_UNDER_SHARE = 0.5
+"""...of which this share lands inside its footprint, well under its top: a table's or a
+pallet's top on legs or blocks, not a box. Speckles on a box's face land so one in a hundred."""
+OPEN_UNDER_INSET_M = 0.01
+"""How far inside the top's rectangle such a ray must reach the support, and such a reading
+land (a far top's rectangle is a centimetre off at most; a face's readings blur at its edges).
+Under a table seen from just past its edge the strip of floor seen is 3-7 cm deep."""
+OPEN_UNDER_DROP = 0.2
+"""...and how far under its top, as a share of its height over the support (a table's top
+is a slab a few centimetres thick)."""
+OPEN_UNDER_PIXELS = 40_000
+"""At most this many readings are looked at per top (every k-th row and column)."""
+TABLE_MIN_M = 0.35
+"""A wide top carrying boxes, on the support and at least this high, that the camera sees
+from over its footprint (no ray passes down past its sides) is a table's: from there a table
+and a crate look the same, and a crate on a pallet stands on the pallet."""
 
 
 def _wide(top: Plateau | None) -> bool:
@@ -323,47 +332,77 @@ def _wide(top: Plateau | None) -> bool:
 def open_under(
     boxes: list[Plateau], depth_m: Float32Array, lens: Intrinsics, support: Support
 ) -> BoolArray:
-    """Per box, whether another box stands on it and the camera sees under it past its sides:
-    a table seen from the side, with the floor round it and under it. Looking straight down
-    no ray passes its sides, and this cannot tell. Only tops carrying boxes are looked under:
-    a clump afloat is :func:`seen_under`'s."""
+    """Per box, whether another box stands on it and it is no solid box but a table's top: the
+    camera sees under it past its sides (the floor round it and under it), or sees it from over
+    its footprint, on the support and as high as a table. Only tops carrying boxes are looked
+    under: a clump afloat is :func:`seen_under`'s."""
     result: BoolArray = np.zeros(len(boxes), dtype=bool)
     carrying = {id(b.stands_on) for b in boxes if b.stands_on is not None}
+    for i, box in enumerate(boxes):
+        if box.rect is None or id(box) not in carrying or not _wide(box):
+            continue
+        if not 0.0 < box.height_m < support.offset_camera_m:
+            continue
+        looked, under = _looked_under(box, box.rect, depth_m, lens, support)
+        if looked >= OPEN_UNDER_SIDE_RAYS:
+            result[i] = under >= OPEN_UNDER_SHARE * looked
+        else:
+            result[i] = box.stands_on is None and box.height_m >= TABLE_MIN_M
+    return result
+
+
+def _looked_under(
+    box: Plateau, rect: Rectangle, depth_m: Float32Array, lens: Intrinsics, support: Support
+) -> tuple[int, int]:
+    """How many readings (of every k-th pixel) lie along rays that pass down past the top's
+    sides and reach the support inside its footprint, and how many of those land inside the
+    footprint, under the top by :data:`OPEN_UNDER_DROP` of its height or more."""
     cam = plane_basis(support, None)
     height = support.offset_camera_m  # the camera's, over the support, at (0, 0) in the plane
-    grid = np.meshgrid(OPEN_UNDER_FRACTIONS, OPEN_UNDER_FRACTIONS)
-    f_len, f_wid = (f.reshape(-1, 1) for f in grid)
-    for i, box in enumerate(boxes):
-        rect = box.rect
-        if rect is None or id(box) not in carrying or not _wide(box):
-            continue
-        ax = np.asarray(rect.axis)
-        across = np.array([-ax[1], ax[0]])
-        middle = np.asarray(rect.middle)
-        flat = middle + f_len * rect.length_m * ax + f_wid * rect.width_m * across
-        # Above the top it stands on; or above the support, when its faces end on nothing seen
-        # (a table's top, its edge seen from the side, is a slab of a few centimetres).
-        base = box.base_m if box.stands_on is not None else 0.0
-        level = base + OPEN_UNDER_LEVEL * (box.height_m - base)
-        if not level < box.height_m < height:
-            continue
-        # Where each ray crosses the top's level: off the top, it passes down past a side.
-        crossing = flat * ((height - box.height_m) / (height - level)) - middle
-        side = (np.abs(crossing @ ax) > 0.5 * rect.length_m) | (
-            np.abs(crossing @ across) > 0.5 * rect.width_m
-        )
-        pts = flat[:, :1] * cam[0] + flat[:, 1:] * cam[1] + (level - height) * cam[2]
-        z = pts[:, 2]
-        u, v, inside = _pixels(pts, lens, depth_m.shape)
-        side &= inside
-        if np.count_nonzero(side) < OPEN_UNDER_SIDE_RAYS:
-            continue
-        seen = depth_m[v[side].astype(np.intp), u[side].astype(np.intp)]
-        noise = np.maximum(3.0 * support.sigma_at(z[side]), LEVEL_TOLERANCE_FLOOR_M)
-        with np.errstate(invalid="ignore"):
-            past = np.count_nonzero(seen > z[side] + noise)
-        result[i] = past >= OPEN_UNDER_SHARE * np.count_nonzero(side)
-    return result
+    top = box.height_m
+    rows_n, cols_n = depth_m.shape
+    axes = np.array([rect.axis, (-rect.axis[1], rect.axis[0])])  # along, across
+    middle = np.asarray(rect.middle)
+    half = np.array([rect.length_m, rect.width_m]) / 2
+    # The part of the picture the box would fill, from its top down to the support.
+    corners = middle + (np.array([[-1, -1], [-1, 1], [1, -1], [1, 1]]) * half) @ axes
+    pts = np.concatenate([corners @ cam[:2] + (level - height) * cam[2] for level in (top, 0.0)])
+    r0, r1, c0, c1 = 0, rows_n, 0, cols_n
+    if (pts[:, 2] > 0).all():
+        u = lens.fx * pts[:, 0] / pts[:, 2] + lens.cx
+        v = lens.fy * pts[:, 1] / pts[:, 2] + lens.cy
+        c0, c1 = max(int(u.min()), 0), min(int(u.max()) + 2, cols_n)
+        r0, r1 = max(int(v.min()), 0), min(int(v.max()) + 2, rows_n)
+        if c0 >= c1 or r0 >= r1:
+            return 0, 0
+    step = max(1, math.ceil(math.sqrt((r1 - r0) * (c1 - c0) / OPEN_UNDER_PIXELS)))
+    d = depth_m[r0:r1:step, c0:c1:step].astype(np.float64)
+    x = ((np.arange(c0, c1, step) - lens.cx) / lens.fx)[np.newaxis, :] * d
+    y = ((np.arange(r0, r1, step) - lens.cy) / lens.fy)[:, np.newaxis] * d
+    point = np.stack([x, y, d], axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        flat = (point @ cam[:2].T - middle) @ axes.T  # along and across, from the middle
+        h = point @ cam[2] + height
+        valid = (d > 0) & (h < height)
+        # Where each ray crosses the top's level and the support's: from the camera, a share
+        # of the way to its reading.
+        camera = -middle @ axes.T
+        past = ~_in_rect(camera, flat, (height - top) / (height - h), half)
+        reach = _in_rect(camera, flat, height / (height - h), half - OPEN_UNDER_INSET_M)
+        rays = valid & past & reach
+        lands = _in_rect(camera, flat, np.ones_like(d), half - OPEN_UNDER_INSET_M)
+        under = rays & lands & (h < (1.0 - OPEN_UNDER_DROP) * top)
+    return int(np.count_nonzero(rays)), int(np.count_nonzero(under))
+
+
+def _in_rect(
+    camera: Float64Array, flat: Float64Array, share: Float64Array, half: Float64Array
+) -> BoolArray:
+    """Whether the point ``share`` of the way from ``camera`` to each of ``flat`` (along and
+    across a rectangle, from its middle) lies inside it (half sides ``half``)."""
+    at = camera + (flat - camera) * share[..., np.newaxis]
+    inside: BoolArray = (np.abs(at[..., 0]) < half[0]) & (np.abs(at[..., 1]) < half[1])
+    return inside
 
 
 def extent_unknown(box: Plateau) -> bool:
