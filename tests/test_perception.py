@@ -727,7 +727,8 @@ def test_narrow_boxes_with_stray_outline_pixels_through_an_azure_kinect(seed):
 def test_boxes_of_the_median_join_those_of_the_picture():
     """A box found in the median picture is added only where it shares no room with one
     found in the picture itself (the same box seen twice), a box standing on a box shares
-    none, and ``on`` points into the joined list, highest top first."""
+    none, a neighbour overlapping by a sliver (the picture merged it into the next box) is
+    added, and ``on`` points into the joined list, highest top first."""
     from onebox.perception.boxes import Box, _together
 
     def box(x, top, height, on=None, size=(0.3, 0.2)):
@@ -743,6 +744,10 @@ def test_boxes_of_the_median_join_those_of_the_picture():
     assert [b.top_middle[0] for b in joined] == [0.3, 0.0, 1.0, -1.0]
     assert joined[0].on == 1 and joined[1] is lower
     assert _together(seen, [box(1.02, 0.1, 0.1, size=(0.1, 0.1))], support) == seen
+    # 1 cm of a 30 cm box's length under the picture's box beside it: a box of its own.
+    sliver = box(0.29, 0.2, 0.2)
+    assert _together(seen, [sliver], support) == [lower, sliver, beside]
+    assert _together(seen, [box(0.2, 0.2, 0.2)], support) == seen
 
 
 TAN = ((200, 150, 90), (140, 100, 60))

@@ -339,7 +339,7 @@ def open_under(
     result: BoolArray = np.zeros(len(boxes), dtype=bool)
     carrying = {id(b.stands_on) for b in boxes if b.stands_on is not None}
     for i, box in enumerate(boxes):
-        if box.rect is None or id(box) not in carrying or not _wide(box):
+        if box.platform or box.rect is None or id(box) not in carrying or not _wide(box):
             continue
         if not 0.0 < box.height_m < support.offset_camera_m:
             continue

@@ -124,6 +124,9 @@ too: there 4 sigma, the least step the finder trusts, is as tall as many a box."
 SHARED_HEIGHT_M = 0.01
 """Two boxes whose heights overlap by more than this (and whose footprints overlap) share
 room: one is not standing on the other."""
+SHARED_FOOTPRINT = 0.25
+"""...and whose footprints overlap by more than this share of the smaller one's: one box
+found in both pictures, not two neighbours, one of them misread in one picture."""
 
 Float32Array = npt.NDArray[np.float32]
 Float64Array = npt.NDArray[np.float64]
@@ -277,36 +280,67 @@ def _together(boxes: list[Box], more: list[Box], support: Support) -> list[Box]:
 
 
 def _share_room(a: Box, b: Box, normal: Float64Array) -> bool:
-    """Whether two boxes overlap: their heights along ``normal`` by more than a centimetre,
-    and their footprints (rectangles across ``normal``) at all."""
+    """Whether two boxes are one box seen twice: their heights along ``normal`` overlap by more
+    than a centimetre, and their footprints (rectangles across ``normal``) by more than
+    :data:`SHARED_FOOTPRINT` of the smaller one. Neighbours, or a box one picture merged with
+    its neighbour, overlap by a sliver at most."""
     half = []
     for box in (a, b):
         top = float(normal @ np.asarray(box.top_middle))
         half.append((top - box.size[2], top))
     if min(half[0][1], half[1][1]) - max(half[0][0], half[1][0]) <= SHARED_HEIGHT_M:
         return False
-    axes: list[Float64Array] = []
-    corners: list[list[Float64Array]] = []
+    across = np.cross(normal, [1.0, 0.0, 0.0])
+    if np.linalg.norm(across) < 0.5:
+        across = np.cross(normal, [0.0, 1.0, 0.0])
+    plane = np.stack([across / np.linalg.norm(across), np.cross(normal, across)])
+    outlines = []
     for box in (a, b):
-        x, y, w = box.quaternion_xyzw[0], box.quaternion_xyzw[1], box.quaternion_xyzw[3]
-        z = box.quaternion_xyzw[2]
+        x, y, z, w = box.quaternion_xyzw
         length = np.array([1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)])
         width = np.cross(normal, length)
         middle = np.asarray(box.top_middle)
-        corners.append(
-            [
-                middle + sx * box.size[0] / 2 * length + sy * box.size[1] / 2 * width
-                for sx in (-1, 1)
-                for sy in (-1, 1)
-            ]
-        )
-        axes.extend((length, width))
-    for axis in axes:
-        ra = [float(axis @ c) for c in corners[0]]
-        rb = [float(axis @ c) for c in corners[1]]
-        if max(ra) <= min(rb) or max(rb) <= min(ra):
-            return False
-    return True
+        corners = [
+            middle + sx * box.size[0] / 2 * length + sy * box.size[1] / 2 * width
+            for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))
+        ]
+        outlines.append(np.array(corners) @ plane.T)
+    smaller = min(box.size[0] * box.size[1] for box in (a, b))
+    return _overlap_area(outlines[0], outlines[1]) > SHARED_FOOTPRINT * smaller
+
+
+def _overlap_area(p: Float64Array, q: Float64Array) -> float:
+    """The area two convex polygons (corners in order, n x 2) share: ``p`` clipped by each of
+    ``q``'s sides in turn (Sutherland-Hodgman)."""
+    orient = 1.0 if _signed_area(q) >= 0 else -1.0
+    poly = list(p)
+    for k in range(len(q)):
+        if not poly:
+            return 0.0
+        s, e = q[k], q[(k + 1) % len(q)]
+        edge = e - s
+
+        def side(pt: Float64Array, s: Float64Array = s, edge: Float64Array = edge) -> float:
+            return orient * float(edge[0] * (pt[1] - s[1]) - edge[1] * (pt[0] - s[0]))
+
+        clipped = []
+        for i, cur in enumerate(poly):
+            prev = poly[i - 1]
+            sc, sp = side(cur), side(prev)
+            if sc >= 0:
+                if sp < 0:
+                    clipped.append(prev + (cur - prev) * (sp / (sp - sc)))
+                clipped.append(cur)
+            elif sp >= 0:
+                clipped.append(prev + (cur - prev) * (sp / (sp - sc)))
+        poly = clipped
+    return abs(_signed_area(np.array(poly))) if len(poly) >= 3 else 0.0
+
+
+def _signed_area(poly: Float64Array) -> float:
+    """A polygon's area, positive when its corners run anticlockwise (shoelace)."""
+    x, y = poly[:, 0], poly[:, 1]
+    return 0.5 * float(x @ np.roll(y, -1) - y @ np.roll(x, -1))
 
 
 def _stride(shape: tuple[int, ...], max_pixels: int | None) -> int:
