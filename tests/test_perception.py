@@ -309,6 +309,21 @@ def test_boxes_on_a_table_with_the_floor_round_it(view, noise):
         assert box.size[2] == pytest.approx(true.size[2], abs=0.005)
 
 
+@pytest.mark.parametrize("noise", ["noise-free", "d435"])
+@pytest.mark.parametrize("tilt_deg", [25.0, 0.0], ids=["from the side", "straight down"])
+def test_an_empty_table_with_the_floor_round_it_is_no_box(tilt_deg, noise):
+    """The table of :func:`test_boxes_on_a_table_with_the_floor_round_it` with nothing on it:
+    its top, 0.8 x 0.6 m and 0.6 m over the floor, was a box that high. Seen from the side the
+    camera sees the floor under it; seen from over it, a top so wide and high is a table's."""
+    camera = Camera.tilted(1.0, tilt_deg, target=(0.0, 0.0, 0.6), width=640, height=480)
+    depth, colour = render(Scene(camera, Plane(), table_on_legs((0.8, 0.6), 0.6, 10.0)))
+    model = Noise.d435() if noise == "d435" else Noise()
+    noisy = add_noise(depth, model, np.random.default_rng(0))
+    found = find_boxes(noisy, camera.lens, camera.camera_to_world, colour)
+    assert found.support is not None and abs(found.support.offset_m) < 0.01
+    assert found.boxes == []
+
+
 @pytest.mark.parametrize(
     ("crate", "tilt_deg"),
     [((0.5, 0.4, 0.6), 30.0), ((0.5, 0.4, 0.3), 30.0), ((0.5, 0.4, 0.3), 0.0)],

@@ -301,11 +301,12 @@ def seen_under(
 
 
 OPEN_UNDER_MIN_M = 0.3
-"""Only tops at least this wide are looked under: a carton carrying a carton stays a box, its
-rectangle a centimetre off at most against the strip of floor seen under a table."""
+"""Only tops at least this wide are looked under: a clump afloat is :func:`seen_under`'s, and
+a narrower top's rectangle may be a centimetre off against the strip of floor seen under a
+table."""
 OPEN_UNDER_SIDE_RAYS = 20
-"""A top carrying boxes is looked under along the rays that pass down past its sides into its
-footprint (a solid box's side face stops each of them): at least this many readings of them..."""
+"""A top is looked under along the rays that pass down past its sides into its footprint (a
+solid box's side face stops each of them): at least this many readings of them..."""
 OPEN_UNDER_SHARE = 0.5
 """...of which this share lands inside its footprint, well under its top: a table's or a
 pallet's top on legs or blocks, not a box. Speckles on a box's face land so one in a hundred."""
@@ -319,9 +320,11 @@ is a slab a few centimetres thick)."""
 OPEN_UNDER_PIXELS = 40_000
 """At most this many readings are looked at per top (every k-th row and column)."""
 TABLE_MIN_M = 0.35
-"""A wide top carrying boxes, on the support and at least this high, that the camera sees
-from over its footprint (no ray passes down past its sides) is a table's: from there a table
-and a crate look the same, and a crate on a pallet stands on the pallet."""
+"""A wide top on the support and at least this high that the camera sees from over its
+footprint (no ray passes down past its sides) is a table's if it carries boxes: from there a
+table and a crate look the same, and a crate on a pallet stands on the pallet..."""
+BARE_TABLE_MIN_M = 0.4
+"""...and, carrying nothing, if it is at least this wide too."""
 
 
 def _wide(top: Plateau | None) -> bool:
@@ -332,14 +335,13 @@ def _wide(top: Plateau | None) -> bool:
 def open_under(
     boxes: list[Plateau], depth_m: Float32Array, lens: Intrinsics, support: Support
 ) -> BoolArray:
-    """Per box, whether another box stands on it and it is no solid box but a table's top: the
-    camera sees under it past its sides (the floor round it and under it), or sees it from over
-    its footprint, on the support and as high as a table. Only tops carrying boxes are looked
-    under: a clump afloat is :func:`seen_under`'s."""
+    """Per box, whether it is no solid box but a table's top: the camera sees under it past
+    its sides (the floor round it and under it), or sees it from over its footprint, wide, on
+    the support and as high as a table."""
     result: BoolArray = np.zeros(len(boxes), dtype=bool)
     carrying = {id(b.stands_on) for b in boxes if b.stands_on is not None}
     for i, box in enumerate(boxes):
-        if box.platform or box.rect is None or id(box) not in carrying or not _wide(box):
+        if box.platform or box.rect is None or not _wide(box):
             continue
         if not 0.0 < box.height_m < support.offset_camera_m:
             continue
@@ -347,7 +349,11 @@ def open_under(
         if looked >= OPEN_UNDER_SIDE_RAYS:
             result[i] = under >= OPEN_UNDER_SHARE * looked
         else:
-            result[i] = box.stands_on is None and box.height_m >= TABLE_MIN_M
+            result[i] = (
+                box.stands_on is None
+                and box.height_m >= TABLE_MIN_M
+                and (id(box) in carrying or box.rect.width_m >= BARE_TABLE_MIN_M)
+            )
     return result
 
 
@@ -383,7 +389,9 @@ def _looked_under(
     with np.errstate(invalid="ignore", divide="ignore"):
         flat = (point @ cam[:2].T - middle) @ axes.T  # along and across, from the middle
         h = point @ cam[2] + height
-        valid = (d > 0) & (h < height)
+        # Readings at the top's level are the top's own (its rectangle a little short of it
+        # where the edges drop out), not what the ray meets under or past it.
+        valid = (d > 0) & (h < top - box.tolerance_m)
         # Where each ray crosses the top's level and the support's: from the camera, a share
         # of the way to its reading.
         camera = -middle @ axes.T
