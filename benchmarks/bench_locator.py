@@ -382,6 +382,22 @@ def _judge(
         counts[name][2] += len(found) - len(matched)
 
 
+def _legged_table(
+    rng: np.random.Generator,
+) -> tuple[float, tuple[float, float], tuple[Box, ...]]:
+    """A table on legs 0.4-0.8 m high, 0.5-0.9 x 0.4-0.7 m, turned up to 20 degrees: its
+    height, its size and its top and legs."""
+    height_m = float(rng.uniform(0.4, 0.8))
+    size = (float(rng.uniform(0.5, 0.9)), float(rng.uniform(0.4, 0.7)))
+    return height_m, size, table_on_legs(size, height_m, float(rng.uniform(-20, 20)))
+
+
+def _over_table(rng: np.random.Generator, height_m: float) -> Camera:
+    """A 640 x 480 camera 0.6-1.4 m over a table's middle, tilted up to 35 degrees."""
+    over, tilt = float(rng.uniform(0.6, 1.4)), float(rng.uniform(0, 35))
+    return Camera.tilted(over, tilt, target=(0.0, 0.0, height_m), width=640, height=480)
+
+
 def tables_on_legs(tables: int = 20) -> None:
     """Tables on legs 0.4-0.8 m high, 0.5-0.9 x 0.4-0.7 m, the floor round them, 2-5 boxes on
     each, a camera 0.6-1.4 m over the table tilted up to 35 degrees: found / missed / false as
@@ -392,9 +408,7 @@ def tables_on_legs(tables: int = 20) -> None:
     noises = {name: noise for name, noise in NOISES.items() if name != "sigma 3 mm"}
     counts = {name: [0, 0, 0] for name in noises}
     for _ in range(tables):
-        height_m = float(rng.uniform(0.4, 0.8))
-        size = (float(rng.uniform(0.5, 0.9)), float(rng.uniform(0.4, 0.7)))
-        table = table_on_legs(size, height_m, float(rng.uniform(-20, 20)))
+        height_m, size, table = _legged_table(rng)
         top = Plane((0.0, 0.0, height_m))
         boxes: list[Box] = []
         for _ in range(int(rng.integers(2, 6))):
@@ -416,8 +430,7 @@ def tables_on_legs(tables: int = 20) -> None:
                 for o in boxes
             ):
                 boxes.append(box)
-        over, tilt = float(rng.uniform(0.6, 1.4)), float(rng.uniform(0, 35))
-        camera = Camera.tilted(over, tilt, target=(0.0, 0.0, height_m), width=640, height=480)
+        camera = _over_table(rng, height_m)
         depth, colour = render(Scene(camera, Plane(), (*table, *boxes)))
         _judge(depth, colour, camera, boxes, noises, rng, counts)
     shown = ", ".join(f"{name} {'/'.join(map(str, c))}" for name, c in counts.items())
@@ -432,11 +445,8 @@ def empty_tables_on_legs(tables: int = 20) -> None:
     noises = {name: noise for name, noise in NOISES.items() if name != "sigma 3 mm"}
     false = dict.fromkeys(noises, 0)
     for _ in range(tables):
-        height_m = float(rng.uniform(0.4, 0.8))
-        size = (float(rng.uniform(0.5, 0.9)), float(rng.uniform(0.4, 0.7)))
-        table = table_on_legs(size, height_m, float(rng.uniform(-20, 20)))
-        over, tilt = float(rng.uniform(0.6, 1.4)), float(rng.uniform(0, 35))
-        camera = Camera.tilted(over, tilt, target=(0.0, 0.0, height_m), width=640, height=480)
+        height_m, _, table = _legged_table(rng)
+        camera = _over_table(rng, height_m)
         depth, colour = render(Scene(camera, Plane(), table))
         for name, noise in noises.items():
             noisy = depth if noise is None else add_noise(depth, noise, rng)
