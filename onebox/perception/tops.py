@@ -316,9 +316,13 @@ def plateaus(
             rest = candidates[top_flat[candidates] == 0]
             _grow(top_flat, rest, h_flat, own_level, below, width_p, None, reach)
 
-    def measured(count: int) -> tuple[_Tops, list[Plateau]]:
+    def measured(
+        count: int, only: BoolArray | None = None, kept: list[Plateau] | None = None
+    ) -> tuple[_Tops, list[Plateau], list[Plateau]]:
+        """The tops gathered; those ``only`` flags measured (every one without it); those
+        measured, and them with ``kept`` in label order."""
         tops = _Tops.gather(top_lab, count, PAD, (r0, c0))
-        return tops, _measure_all(
+        fresh = _measure_all(
             tops,
             top_flat,
             h_flat,
@@ -333,16 +337,19 @@ def plateaus(
             support,
             settings,
             depth.shape,
+            only,
         )
+        return tops, fresh, sorted([*(kept or []), *fresh], key=lambda p: p.label)
 
     # Measured, then looked over for seams between cartons of one shade (colour only), split
-    # and measured again; then the pieces of one carton's top joined, and measured again.
-    for look in range(SEAM_ROUNDS + 1):
-        tops, plateaus = measured(tops_n)
-        if look == SEAM_ROUNDS or colour_cut is None or grey is None:
+    # and measured again; then the pieces of one carton's top joined, and measured again. A top
+    # is measured again only if it changed: each is measured on its own pixels and level.
+    tops, fresh, plateaus = measured(tops_n)
+    for _ in range(SEAM_ROUNDS):
+        if colour_cut is None or grey is None:
             break
         cells = _seams(
-            plateaus,
+            fresh,
             tops,
             s_flat,
             colour_cut.reshape(-1),
@@ -354,7 +361,13 @@ def plateaus(
         )
         if not cells:
             break
+        before = tops_n
         level, tol, tops_n = _split_tops(top_flat, tops, cells, level, tol, h_flat, p_idx, p_top)
+        changed = np.zeros(tops_n, dtype=bool)
+        changed[[t for t, _ in cells]] = True
+        changed[before:] = True
+        kept = [p for p in plateaus if not changed[p.label]]
+        tops, fresh, plateaus = measured(tops_n, changed, kept)
     if colour_cut is not None and grey is not None:
         across, down = lens.rays(cols_n, rows_n)
         basis = plane_basis(support, None)
@@ -364,8 +377,15 @@ def plateaus(
             groups = _one_carton(plateaus, top_lab, lens, support, shades, settings.colour_step)
             if not groups:
                 break
-            level, tol, tops_n = _merge_tops(top_flat, groups, level, tol, h_flat, p_idx, p_top)
-            tops, plateaus = measured(tops_n)
+            level, tol, tops_n, new, joined = _merge_tops(
+                top_flat, groups, level, tol, h_flat, p_idx, p_top
+            )
+            changed = np.zeros(tops_n, dtype=bool)
+            changed[joined] = True
+            kept = [p for p in plateaus if not changed[new[p.label]]]
+            for p in kept:
+                p.label = int(new[p.label])
+            tops, _, plateaus = measured(tops_n, changed, kept)
     if colour_cut is not None:
         for strip in _print_strips(plateaus):
             strip.is_box = False
@@ -644,6 +664,26 @@ class _Tops:
             shift,
         )
 
+    def subset(self, chosen: BoolArray) -> tuple[_Tops, npt.NDArray[np.intp]]:
+        """Only the tops ``chosen`` (one flag a label), their labels unchanged; with each
+        kept pixel's place in this one's grouping."""
+        at = np.flatnonzero(chosen[self.top])
+        counts = np.where(chosen, self.counts, 0)
+        starts = np.concatenate(([0], np.cumsum(counts)[:-1]))
+        kept = _Tops(
+            self.flat[at],
+            self.top[at],
+            starts,
+            counts,
+            self.width,
+            self.rows[at],
+            self.cols[at],
+            np.where(chosen, self.row_fill, 0.0),
+            np.where(chosen, self.col_fill, 0.0),
+            self.shift,
+        )
+        return kept, at
+
 
 def _grouped(
     labels: npt.NDArray[np.int32], count: int
@@ -811,10 +851,19 @@ def _measure_all(
     support: Support,
     settings: FinderSettings,
     shape: tuple[int, int],
+    only: BoolArray | None = None,
 ) -> list[Plateau]:
-    """Every top's plane, outline, rectangle and score; which of them are boxes."""
+    """Every top's plane, outline, rectangle and score; which of them are boxes. With
+    ``only`` (one flag a label), only those tops, measured as they are among all of them."""
     rows_n, cols_n = shape
     count = len(level)
+    # The top's plane from its moments, all tops at once, on a sample of at most ~6k pixels
+    # (every k-th of the grouped pixels: each top keeps its share).
+    k = max(1, len(tops.top) // 6_000)
+    sample: slice | BoolArray = slice(k // 2, None, k)
+    if only is not None:
+        tops, at = tops.subset(only)
+        sample = at % k == k // 2
     top = tops.top
     across, down = lens.rays(cols_n, rows_n)
     basis = plane_basis(support, None)
@@ -825,10 +874,6 @@ def _measure_all(
     n = np.maximum(tops.counts, 1).astype(np.float64)
     area = np.bincount(top, weights=pixel_area, minlength=count)
     mean_area = area / n
-    # The top's plane from its moments, all tops at once, on a sample of at most ~6k pixels
-    # (every k-th of the grouped pixels: each top keeps its share).
-    k = max(1, len(top) // 6_000)
-    sample = slice(k // 2, None, k)
     ds = d[sample].astype(np.float64)
     xyz = (across[tops.cols[sample]] * ds, down[tops.rows[sample]] * ds, ds)
     st = top[sample]
@@ -967,7 +1012,7 @@ def _measure_all(
     edge_starts = np.searchsorted(e_top, np.arange(count))
     edge_stops = np.searchsorted(e_top, np.arange(count), side="right")
     reach = np.maximum(tol, FLAT_REACH_M)
-    loose = _loose_groups(p_idx, p_top, p_h, level, reach, count)
+    loose = _loose_groups(p_idx, p_top, p_h, level, reach, count, only)
     plateaus: list[Plateau] = []
     # The tops that are boxes unless they are round, and their rectangles' axes.
     candidates: list[Plateau] = []
@@ -1608,10 +1653,10 @@ def _merge_tops(
     h_flat: Float32Array,
     p_idx: npt.NDArray[np.intp],
     p_top: npt.NDArray[np.int32],
-) -> tuple[Float64Array, Float64Array, int]:
+) -> tuple[Float64Array, Float64Array, int, npt.NDArray[np.intp], npt.NDArray[np.intp]]:
     """Each group of tops becomes one (the labels renumbered from 0 without gaps);
     ``top_flat`` and ``p_top`` are relabelled in place; returns the levels and tolerances, one
-    per top, and the number of tops."""
+    per top, the number of tops, each old label's new one and the new labels of the joined."""
     target = np.arange(len(level))
     for group in groups:
         target[group] = group[0]
@@ -1631,7 +1676,7 @@ def _merge_tops(
     on = labelled[is_joined[top_flat[labelled]]]
     own = _levels(h_flat[on], top_flat[on] - 1, count, merged_tol)
     merged_level[joined] = own[joined]
-    return merged_level, merged_tol, count
+    return merged_level, merged_tol, count, new, joined
 
 
 def _connected(flat: npt.NDArray[np.intp], width: int) -> list[npt.NDArray[np.intp]]:
@@ -1953,10 +1998,13 @@ def _loose_groups(
     level: Float64Array,
     tol: Float64Array,
     count: int,
+    only: BoolArray | None = None,
 ) -> list[npt.NDArray[np.intp]]:
-    """Per top, its piece's pixels within four tolerances below its height (the curvature
-    test's footprint)."""
+    """Per top (of those ``only`` flags, if given), its piece's pixels within four tolerances
+    below its height (the curvature test's footprint)."""
     keep = p_h > level[p_top] - 4.0 * tol[p_top]
+    if only is not None:
+        keep &= only[p_top]
     which = p_top[keep]
     order = np.argsort(which.astype(np.int16 if count < 32_000 else np.int32), kind="stable")
     flat = p_idx[keep][order]
