@@ -290,15 +290,19 @@ def _share_room(a: Box, b: Box, normal: Float64Array) -> bool:
         half.append((top - box.size[2], top))
     if min(half[0][1], half[1][1]) - max(half[0][0], half[1][0]) <= SHARED_HEIGHT_M:
         return False
-    across = np.cross(normal, [1.0, 0.0, 0.0])
+    apart = np.asarray(a.top_middle) - np.asarray(b.top_middle)
+    apart -= (apart @ normal) * normal
+    if np.linalg.norm(apart) >= 0.5 * (math.hypot(*a.size[:2]) + math.hypot(*b.size[:2])):
+        return False  # the circles round their footprints do not meet
+    across = tops.cross(normal, np.array([1.0, 0.0, 0.0]))
     if np.linalg.norm(across) < 0.5:
-        across = np.cross(normal, [0.0, 1.0, 0.0])
-    plane = np.stack([across / np.linalg.norm(across), np.cross(normal, across)])
+        across = tops.cross(normal, np.array([0.0, 1.0, 0.0]))
+    plane = np.stack([across / np.linalg.norm(across), tops.cross(normal, across)])
     outlines = []
     for box in (a, b):
         x, y, z, w = box.quaternion_xyzw
         length = np.array([1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)])
-        width = np.cross(normal, length)
+        width = tops.cross(normal, length)
         middle = np.asarray(box.top_middle)
         corners = [
             middle + sx * box.size[0] / 2 * length + sy * box.size[1] / 2 * width
