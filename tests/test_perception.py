@@ -10,6 +10,7 @@ import pytest
 from scipy import ndimage
 
 from onebox.geometry import Intrinsics
+from onebox.perception import tops
 from onebox.perception.boxes import BoxFinder, FinderSettings, find_boxes
 from onebox.perception.segment import median3
 from onebox.perception.support import Support, fit_support, lump_width, noise_against
@@ -1308,3 +1309,45 @@ def test_side_by_side_cartons_of_two_widths_stay_two():
     assert len(found.boxes) == 2
     for box, true in match(found.boxes, (a, b)):
         assert box.size[1] == pytest.approx(true.size[1], abs=0.004)
+
+
+@pytest.mark.parametrize("noisy", [False, True])
+def test_a_top_measured_again_alone_is_measured_as_among_all(monkeypatch, noisy):
+    """After a seam split (two cartons of one shade end to end) or a taped carton's pieces
+    joined (a pallet of them), only the tops that changed are measured again: each comes out
+    as it does measured among every top."""
+    measure = tops._measure_all
+    alone: list[tuple[int, int]] = []
+
+    def both(*args):
+        *every, only = args
+        measured = measure(*args)
+        if only is not None:
+            among = [p for p in measure(*every) if only[p.label]]
+            assert [repr(p) for p in measured] == [repr(p) for p in among]
+            alone.append((int(only.sum()), len(only)))
+        return measured
+
+    monkeypatch.setattr(tops, "_measure_all", both)
+    plane = Plane()
+    distance_m, turn_deg, size = (
+        (1.5, 10.0, (0.3, 0.2, 0.2)) if noisy else (0.8, 60.0, (0.12, 0.08, 0.06))
+    )
+    along = np.array([math.cos(math.radians(turn_deg)), math.sin(math.radians(turn_deg))])
+    a, b = (
+        box_on(plane, *(s * size[0] / 2 * along), size, turn_deg, colour=(170, 130, 80))
+        for s in (-1.0, 1.0)
+    )
+    camera = Camera.tilted(distance_m, 20.0, width=640, height=480)
+    seam_m = 0.012 if noisy else 0.005
+    scene = Scene(camera, plane, (a, b), seam_m=seam_m, seam_shade=0.7, seam_fades=True)
+    depth, colour = render(scene)
+    if noisy:
+        depth = add_noise(depth, Noise.d435(), np.random.default_rng(3))
+    assert len(find_boxes(depth, camera.lens, camera.camera_to_world, colour).boxes) == 2
+    split = len(alone)
+    _, found = one_shade_pallet(noisy, taped)
+    assert len(found) == 12
+    assert split >= 1 and len(alone) > split, alone
+    assert all(0 < changed <= every for changed, every in alone), alone
+    assert any(changed < every for changed, every in alone), alone  # some kept as they were
