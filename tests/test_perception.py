@@ -433,6 +433,23 @@ def test_wide_seam_band_split_down_its_middle(distance_m):
         assert math.dist(box.centre, true.centre) < 0.002 * distance_m / 0.4
 
 
+def shadowed_seam_pair(size, distance_m, tilt_deg, turn_deg, seam_m, noisy):
+    """Two cartons of one colour end to end, turned ``turn_deg``, the seam between them a
+    shadow that fades in over a few pixels; the cartons and what the finder finds."""
+    plane = Plane()
+    along = np.array([math.cos(math.radians(turn_deg)), math.sin(math.radians(turn_deg))])
+    a, b = (
+        box_on(plane, *(s * size[0] / 2 * along), size, turn_deg, colour=(170, 130, 80))
+        for s in (-1.0, 1.0)
+    )
+    camera = Camera.tilted(distance_m, tilt_deg, width=640, height=480)
+    scene = Scene(camera, plane, (a, b), seam_m=seam_m, seam_shade=0.7, seam_fades=True)
+    depth, colour = render(scene)
+    if noisy:
+        depth = add_noise(depth, Noise.d435(), np.random.default_rng(3))
+    return (a, b), find_boxes(depth, camera.lens, camera.camera_to_world, colour)
+
+
 @pytest.mark.parametrize(
     ("distance_m", "tilt_deg", "turn_deg", "seam_m", "noisy"),
     [
@@ -447,19 +464,8 @@ def test_cartons_of_one_shade_split_at_the_seams_shadow(
     """Two cartons of one colour end to end, the seam between them a shadow that fades in
     over a few pixels (no step between neighbours is a colour edge): one top until the seam's
     line is seen crossing it, then two cartons of their own size."""
-    plane = Plane()
     size = (0.3, 0.2, 0.2) if noisy else (0.12, 0.08, 0.06)
-    along = np.array([math.cos(math.radians(turn_deg)), math.sin(math.radians(turn_deg))])
-    a, b = (
-        box_on(plane, *(s * size[0] / 2 * along), size, turn_deg, colour=(170, 130, 80))
-        for s in (-1.0, 1.0)
-    )
-    camera = Camera.tilted(distance_m, tilt_deg, width=640, height=480)
-    scene = Scene(camera, plane, (a, b), seam_m=seam_m, seam_shade=0.7, seam_fades=True)
-    depth, colour = render(scene)
-    if noisy:
-        depth = add_noise(depth, Noise.d435(), np.random.default_rng(3))
-    found = find_boxes(depth, camera.lens, camera.camera_to_world, colour)
+    (a, b), found = shadowed_seam_pair(size, distance_m, tilt_deg, turn_deg, seam_m, noisy)
     assert len(found.boxes) == 2, [box.size for box in found.boxes]
     bound = 0.003 if not noisy else 0.012
     for box, true in match(found.boxes, (a, b)):
@@ -1329,22 +1335,11 @@ def test_a_top_measured_again_alone_is_measured_as_among_all(monkeypatch, noisy)
         return measured
 
     monkeypatch.setattr(tops, "_measure_all", both)
-    plane = Plane()
-    distance_m, turn_deg, size = (
-        (1.5, 10.0, (0.3, 0.2, 0.2)) if noisy else (0.8, 60.0, (0.12, 0.08, 0.06))
-    )
-    along = np.array([math.cos(math.radians(turn_deg)), math.sin(math.radians(turn_deg))])
-    a, b = (
-        box_on(plane, *(s * size[0] / 2 * along), size, turn_deg, colour=(170, 130, 80))
-        for s in (-1.0, 1.0)
-    )
-    camera = Camera.tilted(distance_m, 20.0, width=640, height=480)
+    pair = ((0.3, 0.2, 0.2), 1.5, 10.0) if noisy else ((0.12, 0.08, 0.06), 0.8, 60.0)
+    size, distance_m, turn_deg = pair
     seam_m = 0.012 if noisy else 0.005
-    scene = Scene(camera, plane, (a, b), seam_m=seam_m, seam_shade=0.7, seam_fades=True)
-    depth, colour = render(scene)
-    if noisy:
-        depth = add_noise(depth, Noise.d435(), np.random.default_rng(3))
-    assert len(find_boxes(depth, camera.lens, camera.camera_to_world, colour).boxes) == 2
+    _, found = shadowed_seam_pair(size, distance_m, 20.0, turn_deg, seam_m, noisy)
+    assert len(found.boxes) == 2
     split = len(alone)
     _, found = one_shade_pallet(noisy, taped)
     assert len(found) == 12
