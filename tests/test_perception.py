@@ -1341,8 +1341,8 @@ def test_a_top_measured_again_alone_is_measured_as_among_all(monkeypatch, noisy)
     _, found = shadowed_seam_pair(size, distance_m, 20.0, turn_deg, seam_m, noisy)
     assert len(found.boxes) == 2
     split = len(alone)
-    _, found = one_shade_pallet(noisy, taped)
-    assert len(found) == 12
+    _, boxes = one_shade_pallet(noisy, taped)
+    assert len(boxes) == 12
     assert split >= 1 and len(alone) > split, alone
     assert all(0 < changed <= every for changed, every in alone), alone
     assert any(changed < every for changed, every in alone), alone  # some kept as they were
