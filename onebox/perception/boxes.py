@@ -20,10 +20,11 @@ module reads the picture at its size, fits the support and reports:
    and how wide the noise's lumps are measured on it. Where the depth noise there is 15 mm or
    more (a D435 past 2 m), steps 2 to 7 run twice: on the picture, then on its 3 x 3 median
    (:func:`onebox.perception.segment.median3`, its noise and lumps measured again against the
-   plane), whose boxes are added where they share no room with
-   one found already. Four sigma, the least step the finder trusts, was taller there than
-   many a box; the median keeps edges and steps and cuts the noise about 2.4-fold, but read
-   alone it lost bases and seams that the picture's own readings give.
+   plane), whose boxes are added where they share no room with one found already; the two
+   readings run side by side, the median's in a thread of its own. Four sigma, the least
+   step the finder trusts, was taller there than many a box; the median keeps edges and
+   steps and cuts the noise about 2.4-fold, but read alone it lost bases and seams that the
+   picture's own readings give.
 2. Heights above it for every pixel, one multiply-add (``depth * slope + offset``, the slope
    cached per lens and plane); only the rows and columns holding standing pixels go further.
 3. Standing pixels split into pieces at height steps and colour edges
@@ -99,6 +100,8 @@ module reads the picture at its size, fits the support and reports:
 from __future__ import annotations
 
 import math
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -196,14 +199,44 @@ def find_boxes(
         )
     if support is None:
         return Found(None, [], frame)
-    boxes = _read(depth, lens, camera_to_world, colour, settings, support)
+    median = None
     if settings.noise_sigma_m is None and support.sigma_m > SMOOTH_SIGMA_M:
-        smooth = segment.median3(depth)
-        calmer = replace(support, sigma_m=noise_against(smooth, lens, support))
-        calmer = replace(calmer, lump_px=lump_width(smooth, lens, calmer))
-        more = _read(smooth, lens, camera_to_world, colour, settings, calmer)
-        boxes = _together(boxes, more, support)
+        # The two readings share nothing but their inputs: the median's runs in a thread
+        # beside this one (NumPy's array work lets go of the interpreter).
+        median = _median_reader().submit(
+            _read_median, depth, lens, camera_to_world, colour, settings, support
+        )
+    boxes = _read(depth, lens, camera_to_world, colour, settings, support)
+    if median is not None:
+        boxes = _together(boxes, median.result(), support)
     return Found(support, boxes, frame)
+
+
+def _read_median(
+    depth: Float32Array,
+    lens: Intrinsics,
+    camera_to_world: Float64Array | None,
+    colour: npt.NDArray[np.uint8] | None,
+    settings: FinderSettings,
+    support: Support,
+) -> list[Box]:
+    """Steps 2 to 7 on the picture's 3 x 3 median, its noise and lumps measured again."""
+    smooth = segment.median3(depth)
+    calmer = replace(support, sigma_m=noise_against(smooth, lens, support))
+    calmer = replace(calmer, lump_px=lump_width(smooth, lens, calmer))
+    return _read(smooth, lens, camera_to_world, colour, settings, calmer)
+
+
+_median_readers: dict[int, ThreadPoolExecutor] = {}
+
+
+def _median_reader() -> ThreadPoolExecutor:
+    """This process's thread for the median's reading (a forked child makes its own: its
+    parent's thread is not in it)."""
+    pid = os.getpid()
+    if pid not in _median_readers:
+        _median_readers[pid] = ThreadPoolExecutor(1, thread_name_prefix="onebox-median")
+    return _median_readers[pid]
 
 
 def _read(
