@@ -199,32 +199,17 @@ def find_boxes(
         )
     if support is None:
         return Found(None, [], frame)
-    median = None
+    from_median = None
     if settings.noise_sigma_m is None and support.sigma_m > SMOOTH_SIGMA_M:
         # The two readings share nothing but their inputs: the median's runs in a thread
         # beside this one (NumPy's array work lets go of the interpreter).
-        median = _median_reader().submit(
-            _read_median, depth, lens, camera_to_world, colour, settings, support
+        from_median = _median_reader().submit(
+            _read, depth, lens, camera_to_world, colour, settings, support, median=True
         )
     boxes = _read(depth, lens, camera_to_world, colour, settings, support)
-    if median is not None:
-        boxes = _together(boxes, median.result(), support)
+    if from_median is not None:
+        boxes = _together(boxes, from_median.result(), support)
     return Found(support, boxes, frame)
-
-
-def _read_median(
-    depth: Float32Array,
-    lens: Intrinsics,
-    camera_to_world: Float64Array | None,
-    colour: npt.NDArray[np.uint8] | None,
-    settings: FinderSettings,
-    support: Support,
-) -> list[Box]:
-    """Steps 2 to 7 on the picture's 3 x 3 median, its noise and lumps measured again."""
-    smooth = segment.median3(depth)
-    calmer = replace(support, sigma_m=noise_against(smooth, lens, support))
-    calmer = replace(calmer, lump_px=lump_width(smooth, lens, calmer))
-    return _read(smooth, lens, camera_to_world, colour, settings, calmer)
 
 
 _median_readers: dict[int, ThreadPoolExecutor] = {}
@@ -246,8 +231,14 @@ def _read(
     colour: npt.NDArray[np.uint8] | None,
     settings: FinderSettings,
     support: Support,
+    median: bool = False,
 ) -> list[Box]:
-    """Steps 2 to 7 on one picture."""
+    """Steps 2 to 7 on one picture, or on its 3 x 3 median (its noise and lumps measured
+    again against the plane)."""
+    if median:
+        depth = segment.median3(depth)
+        support = replace(support, sigma_m=noise_against(depth, lens, support))
+        support = replace(support, lump_px=lump_width(depth, lens, support))
     plateaus, height_m, labels_top = tops.plateaus(depth, lens, colour, settings, support)
     if not plateaus:
         return []
