@@ -554,7 +554,10 @@ def find_bases(
         ),
         LEVEL_TOLERANCE_FLOOR_M,
     )
-    label_height = np.full(max(p.label for p in plateaus) + 1, np.nan)
+    # Every label the picture holds (a top dropped before it was measured keeps its label
+    # there, with no height: no level is seen on it).
+    labels_n = max(max(p.label for p in plateaus), int(labels_top.max()) - 1) + 1
+    label_height = np.full(labels_n, np.nan)
     label_height[[p.label for p in plateaus]] = [p.height_m for p in plateaus]
     box_h = np.array([b.height_m for b in boxes])
     # A level within the noise of the box's own top is that top, not one under it (each
