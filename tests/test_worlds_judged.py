@@ -37,6 +37,20 @@ def test_random_scene_every_box_right(seed):
     assert max(judged.height_mm + judged.hidden_height_mm) <= 2.0, judged.notes
 
 
+def test_a_box_flush_on_a_narrow_one_beside_a_lower_top_stands_on_the_narrow_one():
+    """Seed 2: a carton 57 x 20 mm stands on one of 63 x 22 mm, their faces nearly flush, and
+    the colour steps down the faces where the lower one begins. A wide top 4 mm higher than
+    the lower carton stands off to one end of the pair, past the line of that side but beside
+    another. Finders before took it for a top meeting the face at the seam (which would put the
+    seam there and say nothing of the base) and measured the carton from the table: 209 mm
+    for 143."""
+    judged = _judged(random_scene(2, boxes=8, objects=3, width=640, height=480))
+    assert judged.missed == 0 and judged.false == 0, judged.notes
+    assert judged.found >= 4
+    # The seam's height is read at the points down the face, 4.3 mm apart on this one.
+    assert max(judged.height_mm) <= 5.0, judged.notes
+
+
 def test_a_tiny_picture_looked_at_across_gives_boxes_not_an_error():
     """160 x 120 through a D435's noise, 45 degrees across: a top dropped before it was
     measured kept a label higher than every measured top's, and the finder before failed on it

@@ -1022,15 +1022,37 @@ BESIDE_MIN_M2 = 0.0008
 def _beside(lower: Plateau, upper: Plateau, sides: tuple[tuple[float, float], ...]) -> bool:
     """Whether the lower top stands beside the upper box past one of ``sides`` (outward
     normals): a top with BESIDE_MIN_M2 or more of it seen (not the rim of a box under it),
-    touching the box, whose rectangle reaches out past that side by more than SEAM_REACH_M."""
+    touching the box, whose rectangle reaches out past that side by more than SEAM_REACH_M,
+    and lies against the side where the face's lines run down it (a top past a side's line
+    but off to one end of it, beside another side, meets none of them)."""
     if lower.visible_m2 < BESIDE_MIN_M2 or lower.rect is None or upper.rect is None:
         return False
     if not _touch(lower, upper):
         return False
     rel = lower.rect.corners - np.asarray(upper.rect.middle)
     return any(
-        float(np.max(rel @ np.array(o))) - upper.rect.half_extent(*o) > SEAM_REACH_M for o in sides
+        float(np.max(rel @ np.array(o))) - upper.rect.half_extent(*o) > SEAM_REACH_M
+        and _against(lower.rect, upper.rect, np.array(o))
+        for o in sides
     )
+
+
+def _against(lower: Rectangle, upper: Rectangle, normal: Float64Array) -> bool:
+    """Whether ``lower`` covers a point within TOUCH_GAP_M past ``upper``'s side facing
+    ``normal`` (outward), on one of the face's lines (faces.LINES along the side)."""
+    run = np.array([-normal[1], normal[0]])
+    middle = np.asarray(upper.middle) + normal * upper.half_extent(*normal)
+    length = 2.0 * upper.half_extent(*run)
+    out = np.array([0.25, 0.5, 1.0]) * TOUCH_GAP_M
+    points = (
+        middle
+        + out[:, np.newaxis, np.newaxis] * normal
+        + (faces.LINES * length)[np.newaxis, :, np.newaxis] * run
+    ).reshape(-1, 2) - np.asarray(lower.middle)
+    ax = np.asarray(lower.axis)
+    along = np.abs(points @ ax) <= lower.length_m / 2
+    across = np.abs(points @ np.array([-ax[1], ax[0]])) <= lower.width_m / 2
+    return bool(np.any(along & across))
 
 
 def _face_step_m(box: Plateau, sides: tuple[tuple[float, float], ...], support: Support) -> float:
@@ -1156,8 +1178,12 @@ def _inside(lower: Plateau, upper: Plateau) -> bool:
     )
 
 
-def _touch(a: Plateau, b: Plateau, gap: float = 0.02) -> bool:
-    """Whether two tops' rectangles (grown by ``gap``, 2 cm) overlap: side by side, touching."""
+TOUCH_GAP_M = 0.02
+"""How far apart two tops' rectangles may be and still touch (side by side)."""
+
+
+def _touch(a: Plateau, b: Plateau, gap: float = TOUCH_GAP_M) -> bool:
+    """Whether two tops' rectangles (grown by ``gap``) overlap: side by side, touching."""
     assert a.rect is not None and b.rect is not None
     for r, s in ((a.rect, b.rect), (b.rect, a.rect)):
         ax0, ax1 = r.axis
