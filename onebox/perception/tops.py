@@ -1111,8 +1111,8 @@ def _measure_all(
             # as a straight side is, by how many points lie near the outermost, a rectangle of
             # any size and turn fills 0.93 or more on the pixel grid. So may a small round
             # top (a ball's or a tin's, 6-10 pixels across, filled 0.93-0.96): a squarish
-            # top is measured by the footprint alone. (A top partly hidden is measured by
-            # the part seen, below.)
+            # top is measured by the footprint alone. (A top partly hidden has its own
+            # measure above: the part of its rectangle seen.)
             lattice_area = _extent(on_axis, float(footprint[t]), clean, True) * _extent(
                 on_perp, float(footprint[t]), clean, True
             )
