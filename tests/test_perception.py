@@ -417,6 +417,38 @@ def test_touching_cartons_split_by_colour():
         assert box.size[0] == pytest.approx(0.1, abs=0.004)
 
 
+@pytest.mark.parametrize(
+    ("gap_m", "turn_deg", "distance_m", "sigma_m"),
+    [
+        (0.002, 10.0, 1.2, 0.0),
+        (0.002, 35.0, 2.0, 0.0),
+        (0.0015, 60.0, 1.2, 0.0),
+        (0.002, 35.0, 1.2, 0.001),
+    ],
+)
+def test_cartons_a_gap_apart_split_from_depth_alone(gap_m, turn_deg, distance_m, sigma_m):
+    """Two cartons of one height 1.5-2 mm apart, turned on the pixel grid, no colour: pixels
+    see down the gap at every few along it only, so the tops join round the dots; the dotted
+    line of pixels far under the tops crossing them from side to side splits them."""
+    plane = Plane()
+    size = (0.25, 0.2, 0.15)
+    along = np.array([math.cos(math.radians(turn_deg)), math.sin(math.radians(turn_deg))])
+    pair = tuple(
+        box_on(plane, *(s * (size[0] + gap_m) / 2 * along), size, turn_deg, colour=(170, 130, 80))
+        for s in (-1.0, 1.0)
+    )
+    camera = Camera.tilted(distance_m, 15.0, width=640, height=480)
+    depth, _ = render(Scene(camera, plane, pair))
+    if sigma_m:
+        depth = add_noise(depth, Noise(sigma_m=sigma_m), np.random.default_rng(1))
+    found = find_boxes(depth, camera.lens, camera.camera_to_world)
+    assert len(found.boxes) == 2, [box.size for box in found.boxes]
+    for box, true in match(found.boxes, pair):
+        assert math.dist(box.centre, true.centre) < 0.004
+        assert box.size[0] == pytest.approx(size[0], abs=0.005)
+        assert box.size[1] == pytest.approx(size[1], abs=0.005)
+
+
 @pytest.mark.parametrize("distance_m", [0.6, 1.2])
 def test_wide_seam_band_split_down_its_middle(distance_m):
     """Cartons of one height with 5 mm dark lines round their tops (a 10 mm band between two):

@@ -228,13 +228,14 @@ def plateaus(
     if settings.max_height_m is not None:
         with np.errstate(invalid="ignore"):
             stand &= h < np.float32(settings.max_height_m)
-    cut = segment.breaks(h, step)
+    depth_cut = segment.breaks(h, step)
+    cut = depth_cut
     colour_cut: BoolArray | None = None
     grey = None
     if colour is not None:
         grey = segment.grey(colour[crop])
         colour_cut = np.pad(segment.colour_breaks(grey, settings.colour_step), pad)
-        cut |= colour_cut
+        cut = depth_cut | colour_cut
         grey = np.pad(grey, pad, mode="edge")
     labels, count = ndimage.label(stand & ~cut)
     if count == 0:
@@ -341,19 +342,23 @@ def plateaus(
         )
         return tops, fresh, sorted([*(kept or []), *fresh], key=lambda p: p.label)
 
-    # Measured, then looked over for seams between cartons of one shade (colour only), split
-    # and measured again; then the pieces of one carton's top joined, and measured again. A top
-    # is measured again only if it changed: each is measured on its own pixels and level.
+    # Measured, then looked over for seams between cartons of one shade (colour lines, or a gap
+    # seen through at every few pixels along it), split and measured again; then the pieces of
+    # one carton's top joined (colour only), and measured again. A top is measured again only
+    # if it changed: each is measured on its own pixels and level.
     tops, fresh, plateaus = measured(tops_n)
     for _ in range(SEAM_ROUNDS):
-        if colour_cut is None or grey is None:
-            break
         cells = _seams(
             fresh,
             tops,
             s_flat,
-            colour_cut.reshape(-1),
-            grey.reshape(-1),
+            top_flat,
+            h_flat,
+            level,
+            tol,
+            depth_cut.reshape(-1),
+            None if colour_cut is None else colour_cut.reshape(-1),
+            None if grey is None else grey.reshape(-1),
             settings.colour_step,
             lens,
             support,
@@ -1211,6 +1216,9 @@ def _nearer_on_level(
 SEAM_ROUNDS = 2
 """Tops are looked over for seams at most this many times (every seam across a top is split at
 once; a seam that only runs across one of the parts shows after)."""
+GAP_TOLERANCES = 2.0
+"""A pixel seen down the gap between two cartons lies this many of their top's tolerances under
+it (noise alone leaves holes in a top no deeper than about one)."""
 SEAM_BIN = 1.5
 """A seam's bins, footprints: a tilted camera's pixels lie farther apart one way."""
 
@@ -1719,17 +1727,23 @@ def _seams(
     plateaus: list[Plateau],
     tops: _Tops,
     s_flat: Float32Array,
-    cut_flat: BoolArray,
-    grey_flat: npt.NDArray[np.int16],
+    top_flat: npt.NDArray[np.int32],
+    h_flat: Float32Array,
+    level: Float64Array,
+    tol: Float64Array,
+    depth_cut_flat: BoolArray,
+    cut_flat: BoolArray | None,
+    grey_flat: npt.NDArray[np.int16] | None,
     colour_step: float,
     lens: Intrinsics,
     support: Support,
     shape: tuple[int, int],
 ) -> list[tuple[int, npt.NDArray[np.intp]]]:
-    """Tops that straight lines of colour edges or dark valleys cross from side to side,
-    parallel to a side of their rectangle, with the top going on past them on both sides (the
-    seams between cartons of one shade, along and across): per such top, its label and each of
-    its pixels' cell between the lines (0, 1, ...)."""
+    """Tops that straight lines of colour edges or dark valleys, or of pixels beside ones seen
+    far down a gap, cross from side to side, parallel to a side of their rectangle, with the
+    top going on past them on both sides (the seams between cartons of one shade, along and
+    across; cartons a pixel or less apart, whose gap the pixels see down at every few along
+    it): per such top, its label and each of its pixels' cell between the lines (0, 1, ...)."""
     rows_n, cols_n = shape
     across, down = lens.rays(cols_n, rows_n)
     basis = plane_basis(support, None)
@@ -1750,7 +1764,17 @@ def _seams(
         ]
     )
     flat = tops.flat[at]
-    dark = segment.valleys(grey_flat, flat, tops.width, colour_step)
+    w = tops.width
+    # Top pixels beside a lower one cut off by a depth step: cartons a few millimetres apart,
+    # seen down the gap between them at every pixel or two along it.
+    label = top_flat[flat]
+    deep = (level - GAP_TOLERANCES * tol)[label - 1]
+    lines = np.zeros(len(flat), dtype=bool)
+    for offset in (-1, 1, -w, w):
+        beside = flat + offset
+        lines |= depth_cut_flat[beside] & (top_flat[beside] != label) & (h_flat[beside] < deep)
+    if grey_flat is not None and cut_flat is not None:
+        lines |= cut_flat[flat] | segment.valleys(grey_flat, flat, w, colour_step)
     # Each pixel's ray met with the top's plane, not its reading: a stereo camera's noise
     # along the ray would smear the line over several footprints.
     top_height = np.repeat([p.height_m for p, _ in long], sizes)
@@ -1758,8 +1782,8 @@ def _seams(
     pa_all, pb_all = _in_plane(basis, across[tops.cols[at]], down[tops.rows[at]], d)
     for (p, rect), end, n in zip(long, np.cumsum(sizes), sizes, strict=True):
         mine = slice(end - n, end)
-        shade = grey_flat[flat[mine]]
-        cut = cut_flat[flat[mine]] | dark[mine]
+        shade = np.zeros(n, dtype=np.int16) if grey_flat is None else grey_flat[flat[mine]]
+        cut = lines[mine]
         if np.count_nonzero(cut) * p.footprint_m < segment.SEAM_MIN_M:
             continue
         pa, pb = pa_all[mine], pb_all[mine]
