@@ -11,7 +11,8 @@ looked at across, 45 degrees from straight down
 seed's world), renders colour and depth with MuJoCo, adds the depth noise (the presets, and a
 D435 whose errors come in lumps 3 pixels wide), and runs the box finder the locator runs
 (``onebox.perception.boxes.BoxFinder``) on the picture, the lens the sim publishes and the
-camera's pose, and judges what it finds against the ground truth (:mod:`onebox.testing.judged`
+camera's pose (and on the depth alone, in the cases saying "depth only": a camera with no
+colour), and judges what it finds against the ground truth (:mod:`onebox.testing.judged`
 says how: found, missed, false; a box partly hidden under another is judged on its height
 only).
 
@@ -55,12 +56,15 @@ class Errors(Judged):
     ms: list[float] = field(default_factory=list)
 
 
-def run_case(scenes: list[SceneDesc], noise: NoiseSpec | None, errors: Errors) -> None:
+def run_case(
+    scenes: list[SceneDesc], noise: NoiseSpec | None, errors: Errors, colour: bool = True
+) -> None:
     for scene in scenes:
         rendered = render_scene(scene, noise if noise is not None else scene.noise)
         finder = BoxFinder(FinderSettings())
+        rgb = rendered.rgb if colour else None
         started = time.perf_counter()
-        found = finder(rendered.depth_m, rendered.lens, rendered.camera_to_world, rendered.rgb)
+        found = finder(rendered.depth_m, rendered.lens, rendered.camera_to_world, rgb)
         errors.ms.append(1000 * (time.perf_counter() - started))
         judge(found, rendered, errors)
 
@@ -162,6 +166,16 @@ def main() -> None:
         ("pallet, azure_kinect", [spec.load(SCENES / "pallet.toml")], PRESETS["azure_kinect"]),
         ("clutter, d435", [spec.load(SCENES / "clutter.toml")], PRESETS["d435"]),
         ("clutter, azure_kinect", [spec.load(SCENES / "clutter.toml")], PRESETS["azure_kinect"]),
+        ("random, noise-free, depth only", None, PRESETS["none"]),
+        ("random, d435, depth only", None, PRESETS["d435"]),
+        ("random looked at across, 45 degrees, noise-free, depth only", None, PRESETS["none"]),
+        ("empty tables, d435, depth only", None, PRESETS["d435"]),
+        ("random pallets, noise-free, depth only", None, PRESETS["none"]),
+        (
+            "random pallets, sigma 2 mm, depth only",
+            None,
+            NoiseSpec(model="gaussian", sigma_m=0.002),
+        ),
     ]
     for title, scenes, noise in cases:
         if args.only and args.only not in title:
@@ -178,7 +192,7 @@ def main() -> None:
         if not scenes:  # --scenes, --empty or --pallets 0: the case is left out
             continue
         errors = Errors()
-        run_case(scenes, noise, errors)
+        run_case(scenes, noise, errors, colour="depth only" not in title)
         report(title, errors, args.verbose)
 
 

@@ -449,6 +449,28 @@ def test_cartons_a_gap_apart_split_from_depth_alone(gap_m, turn_deg, distance_m,
         assert box.size[1] == pytest.approx(size[1], abs=0.005)
 
 
+@pytest.mark.parametrize("turn_deg", [0.0, 25.0, 60.0])
+def test_tops_joined_by_side_faces_through_noise_are_each_a_box_from_depth_alone(turn_deg):
+    """A tall box and a middling one touching a low wide one, seen at 30 degrees through a
+    D435's noise with no colour: the break between neighbours is 4 sigma, more than a side
+    face falls from pixel to pixel, so the faces join the three tops into one piece whose one
+    level was the largest top's. What is left of the piece off that level gets levels of its
+    own."""
+    plane = Plane()
+    c, s = math.cos(math.radians(turn_deg)), math.sin(math.radians(turn_deg))
+    low = box_on(plane, -0.1, 0.0, (0.2, 0.2, 0.08), turn_deg, colour=(170, 130, 80))
+    tall = box_on(plane, -0.1 + 0.16 * c, 0.16 * s, (0.12, 0.12, 0.22), turn_deg)
+    middling = box_on(plane, -0.1 - 0.16 * s, 0.16 * c, (0.1, 0.12, 0.15), turn_deg)
+    camera = Camera.tilted(1.0, 30.0, width=640, height=480)
+    clean, _ = render(Scene(camera, plane, (low, tall, middling)))
+    depth = add_noise(clean, Noise.d435(), np.random.default_rng(2))
+    found = find_boxes(depth, camera.lens, camera.camera_to_world).boxes
+    assert len(found) == 2, [box.size for box in found]
+    for box, true in match(found, (tall, middling)):
+        assert math.dist(box.centre, true.centre) < 0.006
+        assert box.size[2] == pytest.approx(true.size[2], abs=0.004)
+
+
 @pytest.mark.parametrize("distance_m", [0.6, 1.2])
 def test_wide_seam_band_split_down_its_middle(distance_m):
     """Cartons of one height with 5 mm dark lines round their tops (a 10 mm band between two):

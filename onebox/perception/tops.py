@@ -247,9 +247,8 @@ def plateaus(
     lab = flat[idx]
     dd = d_flat[idx]
     area_scale = np.float32(1.0 / (lens.fx * lens.fy))
-    areas = np.bincount(
-        lab, weights=dd * dd * area_scale / np.abs(s_flat[idx]), minlength=count + 1
-    )
+    p_area = dd * dd * area_scale / np.abs(s_flat[idx])
+    areas = np.bincount(lab, weights=p_area, minlength=count + 1)
     areas[0] = 0.0
     # Pieces too small to be a top (a carton's rim cut off by a colour edge, a clump, the cut
     # pixels themselves) may be taken over by the top beside them at the same height.
@@ -294,6 +293,19 @@ def plateaus(
             support,
             (r0 - PAD, c0 - PAD),
         )
+    # Without colour nothing cuts a side face off the tops at its ends.
+    peeled = None
+    if colour is None:
+        peeled = _peel(
+            p_idx, p_top, p_h, p_d, p_area[mine], level, tol, noise_k, h.shape, 0.5 * least
+        )
+    if peeled is not None:
+        level, tol, on_level = peeled
+        reach = np.maximum(tol, FLAT_REACH_M)
+        added = len(level) - tops_n
+        band = np.concatenate([band, np.zeros(added, dtype=bool)])
+        ring = np.concatenate([ring, np.zeros(added, dtype=bool)])
+        tops_n = len(level)
     in_band = band[p_top]
     seated = on_level & ~in_band
     top_flat[p_idx[seated]] = p_top[seated] + 1
@@ -453,6 +465,117 @@ def _levels(
         level = np.where(number > 0, total / np.maximum(number, 1), level)
     result: Float64Array = level
     return result
+
+
+PEEL_ROUNDS = 3
+"""How many more tops one piece may hold, found one under another (see :func:`_peel`)."""
+PEEL_APART = 3.0
+"""A level found in what is left of a piece is a top only if it lies this many of its or the
+piece's level's reaches (the larger) from that level."""
+
+
+def _peel(
+    p_idx: npt.NDArray[np.intp],
+    p_top: npt.NDArray[np.int32],
+    p_h: Float32Array,
+    p_d: Float32Array,
+    p_area: Float64Array,
+    level: Float64Array,
+    tol: Float64Array,
+    noise_k: np.float32,
+    shape: tuple[int, int],
+    least_m2: float,
+) -> tuple[Float64Array, Float64Array, BoolArray] | None:
+    """More tops in one piece: where a side face seen at a slant falls by less than a break
+    from pixel to pixel (a camera looking across, or noise that raises the break), it joins the
+    top above it to the tops it rises from, and the piece's level is only the largest of them.
+    Of each piece's pixels on its level only the largest connected part stays on it; what is
+    left of the piece, as connected parts as large as a top, gets a level of its own if that
+    lies well apart from the piece's, and so on. ``p_top`` is relabelled in place (new tops
+    after the others); returns the levels, tolerances and which pixels lie on their top's
+    level, or None if nothing changed."""
+    count = len(level)
+    on_level = np.abs(p_h - level[p_top]) < np.maximum(tol, FLAT_REACH_M)[p_top]
+    found = _largest_part(np.flatnonzero(on_level), on_level, p_idx, p_top, p_area, shape)
+    spent = np.zeros(len(p_h), dtype=bool)
+    for _ in range(PEEL_ROUNDS):
+        rest = np.flatnonzero(~on_level & ~spent)
+        if len(rest) == 0 or p_area[rest].sum() < least_m2:
+            break
+        mask = np.zeros(shape, dtype=bool)
+        mask.reshape(-1)[p_idx[rest]] = True
+        parts, n = ndimage.label(mask)
+        which = parts.reshape(-1)[p_idx[rest]]
+        area = np.bincount(which, weights=p_area[rest], minlength=n + 1)
+        area[0] = 0.0
+        big = np.flatnonzero(area >= least_m2)
+        if len(big) == 0:
+            break
+        lut = np.full(n + 1, -1, dtype=np.int32)
+        lut[big] = np.arange(len(big), dtype=np.int32)
+        new = lut[which]
+        spent[rest[new < 0]] = True
+        rest, new = rest[new >= 0], new[new >= 0]
+        mean_d = np.bincount(new, weights=p_d[rest], minlength=len(big)) / np.bincount(
+            new, minlength=len(big)
+        )
+        new_tol = np.maximum(
+            3.0 * np.maximum(noise_k * mean_d * mean_d, SIGMA_FLOOR_M), TOP_TOLERANCE_FLOOR_M
+        )
+        new_level = _levels(p_h[rest], new, len(big), new_tol)
+        new_reach = np.maximum(new_tol, FLAT_REACH_M)
+        near = np.abs(p_h[rest] - new_level[new]) < new_reach[new]
+        # A top stands well apart from the level it was left under: the band just under (or
+        # over) a level is where a face or a rounded thing goes on falling (or rising).
+        first = np.zeros(len(big), dtype=np.intp)
+        first[new] = rest
+        parent = p_top[first]
+        apart = PEEL_APART * np.maximum(new_reach, np.maximum(tol, FLAT_REACH_M)[parent])
+        ok = np.abs(new_level - level[parent]) >= apart
+        spent[rest[~ok[new]]] = True
+        if not ok.any():
+            break
+        taken = ok[new]
+        rest, new, near = rest[taken], (np.cumsum(ok) - 1)[new[taken]], near[taken]
+        p_top[rest] = count + new
+        level = np.concatenate([level, new_level[ok]])
+        tol = np.concatenate([tol, new_tol[ok]])
+        count += int(ok.sum())
+        on_level[rest] = near
+        _largest_part(rest[near], on_level, p_idx, p_top, p_area, shape)
+        found = True
+    return (level, tol, on_level) if found else None
+
+
+def _largest_part(
+    sel: npt.NDArray[np.intp],
+    on_level: BoolArray,
+    p_idx: npt.NDArray[np.intp],
+    p_top: npt.NDArray[np.int32],
+    p_area: Float64Array,
+    shape: tuple[int, int],
+) -> bool:
+    """Of each piece's pixels on its level (``sel``), only the largest connected part stays
+    on it (the others, bands across side faces at the top's height, are taken off in place);
+    whether any was."""
+    if len(sel) == 0:
+        return False
+    mask = np.zeros(shape, dtype=bool)
+    mask.reshape(-1)[p_idx[sel]] = True
+    parts, n = ndimage.label(mask)
+    which = parts.reshape(-1)[p_idx[sel]]
+    pieces = np.unique(p_top[sel])
+    if n == len(pieces):
+        return False
+    area = np.bincount(which, weights=p_area[sel], minlength=n + 1)
+    piece_of = np.zeros(n + 1, dtype=np.int64)
+    piece_of[which] = p_top[sel]
+    order = np.argsort(-area[1:], kind="stable") + 1
+    _, first = np.unique(piece_of[order], return_index=True)
+    kept = np.zeros(n + 1, dtype=bool)
+    kept[order[first]] = True
+    on_level[sel[~kept[which]]] = False
+    return True
 
 
 def _bands(
