@@ -15,7 +15,9 @@ slices. Whole-array work only; the caller loops over the (few) pieces.
   (both pixels cut); the top regrows into the cut pixels afterwards, from both sides.
 - Where such a line breaks for a pixel, or the seam is only a shadow darkening over a few
   pixels, two cartons are one top: :func:`seam_lines` finds the straight lines of colour edges
-  and dark valleys (:func:`valleys`) that cross a top, for the caller to split it there.
+  and dark valleys (:func:`valleys`) that cross a top, for the caller to split it there. So
+  it does, from depth alone, for the dotted line of pixels that see down a gap narrower than
+  a pixel between two cartons (the caller marks the top's pixels beside them).
 """
 
 from __future__ import annotations
