@@ -266,9 +266,7 @@ def plateaus(
     p_h, p_d = h_flat[p_idx], dd[mine]
     counts = np.bincount(p_top, minlength=tops_n)
     mean_d = np.bincount(p_top, weights=p_d, minlength=tops_n) / counts
-    tol = np.maximum(
-        3.0 * np.maximum(noise_k * mean_d * mean_d, SIGMA_FLOOR_M), TOP_TOLERANCE_FLOOR_M
-    )
+    tol = _tolerance(mean_d, noise_k)
     level = _levels(p_h, p_top, tops_n, tol)
     reach = np.maximum(tol, FLAT_REACH_M)
     on_level = np.abs(p_h - level[p_top]) < reach[p_top]
@@ -467,6 +465,14 @@ def _levels(
     return result
 
 
+def _tolerance(mean_d: Float64Array, noise_k: np.float32) -> Float64Array:
+    """Each top's tolerance: three sigma of the noise at its mean depth, at least the floor."""
+    result: Float64Array = np.maximum(
+        3.0 * np.maximum(noise_k * mean_d * mean_d, SIGMA_FLOOR_M), TOP_TOLERANCE_FLOOR_M
+    )
+    return result
+
+
 PEEL_ROUNDS = 3
 """How many more tops one piece may hold, found one under another (see :func:`_peel`)."""
 PEEL_APART = 3.0
@@ -519,9 +525,7 @@ def _peel(
         mean_d = np.bincount(new, weights=p_d[rest], minlength=len(big)) / np.bincount(
             new, minlength=len(big)
         )
-        new_tol = np.maximum(
-            3.0 * np.maximum(noise_k * mean_d * mean_d, SIGMA_FLOOR_M), TOP_TOLERANCE_FLOOR_M
-        )
+        new_tol = _tolerance(mean_d, noise_k)
         new_level = _levels(p_h[rest], new, len(big), new_tol)
         new_reach = np.maximum(new_tol, FLAT_REACH_M)
         near = np.abs(p_h[rest] - new_level[new]) < new_reach[new]
