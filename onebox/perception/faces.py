@@ -24,7 +24,11 @@ Where the sides run flush (a box on one of nearly its footprint) depth says noth
 colour may: with the colour picture, a line whose points on the face are all of one even shade
 above a point and of another below it (a step of SEAM_STEP levels or more), at the same height
 as another line of the same side, ends there too (a ``seam``; the caller tells it from a top
-beside the box that meets the face there).
+beside the box that meets the face there). A real camera's colour lies a pixel or two off its
+depth, and paints a face's first or last pixels in the shade of the top's rim above it or of
+the surface seen past its foot: a shade that spans less than SEAM_UNDER_PX across the side's
+edges at the face's end is no box's face (under the seam, only where the picture past the
+face's end shows a lower surface of that shade).
 
 The other way round, each side's ``reach``: how far down its face is seen unbroken from the
 top, on points where the surface seen lies both in the face's plane and at the point's height
@@ -63,6 +67,9 @@ SEAM_MIN_PX = 16.0
 """A line that spans fewer pixels from the top to the surface shows no seam: each pixel of a
 face seen that steeply spans too much of its height (a box on another measured 12-23 mm short
 from a rim's step on a face 10-13 pixels long)."""
+SEAM_UNDER_PX = 3.0
+"""The least a shade either side of a seam spans from the face's end, across the side's edges,
+in pixels: more than a real camera's colour picture lies off its depth."""
 
 
 @dataclass(frozen=True)
@@ -176,8 +183,20 @@ def face_bottoms(
         grey = _grey(colour[rows_at, cols_at])[box_of, side_of, line_of]
         # The surface at the face's foot lies within the tolerance of its plane too, for a
         # face seen steeply: it is no face, and its colour no seam.
-        face = on & (reading.seen_height > tol)
-        s_low, s_high, seam = _seams(face[box_of, side_of, line_of], grey, heights[box_of])
+        face = (on & (reading.seen_height > tol))[box_of, side_of, line_of]
+        s_low, s_high, seam = _seams(face, grey, heights[box_of])
+        # A real camera's colour lies a pixel or two off its depth: a band that thin at
+        # either end of the face may be the top's rim or the surface past its foot.
+        seam &= ~_bled(
+            reading,
+            colour,
+            face,
+            grey,
+            heights[box_of],
+            (s_low, s_high),
+            tol[box_of, 0, 0, 0],
+            (box_of, side_of, line_of),
+        )
     else:
         s_low = s_high = np.zeros(len(low))
         seam = np.zeros(len(low), dtype=bool)
@@ -208,6 +227,74 @@ def face_bottoms(
             bottom = replace(by_seam, seam=True, unseamed=bottom, seam_sides=normals)
         result.append(bottom)
     return Faces(result, reach)
+
+
+def _bled(
+    reading: _Reading,
+    colour: npt.NDArray[np.uint8],
+    face: BoolArray,
+    grey: Float64Array,
+    heights: Float64Array,
+    seam: tuple[Float64Array, Float64Array],
+    tol: Float64Array,
+    line: tuple[npt.NDArray[np.intp], npt.NDArray[np.intp], npt.NDArray[np.intp]],
+) -> BoolArray:
+    """For each line (rows of ``face``, ``grey`` and ``heights``; ``line`` its box, side and
+    line), whether a shade either side of its seam (heights ``seam``: low, high) may be what
+    the picture shows past that end of the face, seen a little off. The colour picture is
+    registered with the depth to a pixel or so (a real camera's depth aligned to its colour)
+    and paints a face's first or last pixels in the shade of the top's rim above it or of the
+    surface seen past its foot. Such a band lies within SEAM_UNDER_PX of the face's end,
+    across the side's edges as the picture shows them (a face seen at a slant shows its lines
+    down it nearly along those edges). Under the seam, it is a band only if a pixel a few on
+    past the face's last point shows a lower surface of its shade: a box under another, turned
+    a little, leaves the face's plane a pixel or two under the seam, of its own shade."""
+    u, v = reading.uv
+    box_of, side_of, _ = line
+    samples = face.shape[1]
+    at = np.arange(len(face))
+    # Across the side's edges (from the foot of its first line to that of its last), the way
+    # the lines run down the face.
+    eu = u[box_of, side_of, -1, -1] - u[box_of, side_of, 0, -1]
+    ev = v[box_of, side_of, -1, -1] - v[box_of, side_of, 0, -1]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        nu, nv = ev / np.hypot(eu, ev), -eu / np.hypot(eu, ev)
+    down = nu * (u[(*line, -1)] - u[(*line, 0)]) + nv * (v[(*line, -1)] - v[(*line, 0)])
+    nu, nv = np.where(down < 0, -nu, nu), np.where(down < 0, -nv, nv)
+
+    def across(end: npt.NDArray[np.intp], inner: npt.NDArray[np.intp]) -> Float64Array:
+        du = u[(*line, inner)] - u[(*line, end)]
+        dv = v[(*line, inner)] - v[(*line, end)]
+        result: Float64Array = np.abs(du * nu + dv * nv)
+        return result
+
+    first = np.argmax(face, axis=1)
+    under = np.argmin(np.abs(heights - seam[0][:, np.newaxis]), axis=1)
+    over = np.argmin(np.abs(heights - seam[1][:, np.newaxis]), axis=1)
+    # The shade under the seam (its first RUN points).
+    index = np.arange(samples)[np.newaxis, :]
+    head = face & (index >= under[:, np.newaxis]) & (index < under[:, np.newaxis] + RUN)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        shade = np.sum(np.where(head, grey, 0.0), axis=1) / np.sum(head, axis=1)
+    last = samples - 1 - np.argmax(face[:, ::-1], axis=1)
+    # The pixels a few on past the face's last point, the surface seen there lower.
+    steps = np.arange(1.0, 1.0 + RUN)
+    pu = np.rint(u[(*line, last)][:, np.newaxis] + nu[:, np.newaxis] * steps)
+    pv = np.rint(v[(*line, last)][:, np.newaxis] + nv[:, np.newaxis] * steps)
+    rows_n, cols_n = reading.depth.shape
+    inside = np.isfinite(pu) & np.isfinite(pv) & (pu >= 0) & (pu < cols_n) & (pv >= 0)
+    inside &= pv < rows_n
+    pu = np.where(inside, pu, 0).astype(np.intp)
+    pv = np.where(inside, pv, 0).astype(np.intp)
+    with np.errstate(invalid="ignore"):
+        inside &= (
+            reading.height_at(pv, pu) < (reading.seen_height[line][at, last] - tol)[:, np.newaxis]
+        )
+        alike = inside & (np.abs(_grey(colour[pv, pu]) - shade[:, np.newaxis]) < SEAM_STEP / 2)
+    bled: BoolArray = (across(first, over) < SEAM_UNDER_PX) | (
+        (across(last, under) < SEAM_UNDER_PX) & alike.any(axis=1)
+    )
+    return bled
 
 
 def resolution_m(top_m: float) -> float:
@@ -409,12 +496,23 @@ class _Reading:
         """Each point's pixel (rows, columns) at the last reading."""
         self.seen_height: Float64Array = np.zeros(0)
         """Each point's surface's height above the plane at the last reading."""
+        self.uv: tuple[Float64Array, Float64Array] = (np.zeros(0), np.zeros(0))
+        """Where each point falls in the picture (columns, rows; not rounded)."""
         # Where each line runs along its side, from the side's middle: N x 4 x L x 2.
         self.along = (
             LINES[np.newaxis, np.newaxis, :, np.newaxis]
             * (2 * half_along[..., np.newaxis, np.newaxis])
             * along[:, :, np.newaxis, :]
         )
+
+    def height_at(self, rows: npt.NDArray[np.intp], cols: npt.NDArray[np.intp]) -> Float64Array:
+        """The height above the plane of the surface seen at these pixels (NaN: no reading)."""
+        d = self.depth[rows, cols].astype(np.float64)
+        d[~(d > 0)] = np.nan
+        across_r, down_r = self.lens.rays(self.depth.shape[1], self.depth.shape[0])
+        xyz = np.stack([across_r[cols] * d, down_r[rows] * d, d], axis=-1)
+        height: Float64Array = xyz @ self.basis[2] + self.camera_height_m
+        return height
 
     def __call__(self, edge_mid: Float64Array) -> tuple[Float64Array, BoolArray, Float64Array]:
         """For faces through ``edge_mid`` (N x 4 x 2): how far out past the face's plane the
@@ -440,6 +538,7 @@ class _Reading:
         ui = np.where(inside, ui, 0).astype(np.intp)
         vi = np.where(inside, vi, 0).astype(np.intp)
         self.pixels = (vi, ui)
+        self.uv = (u, v)
         d = self.depth[vi, ui].astype(np.float64)
         with np.errstate(invalid="ignore"):
             seen = inside & np.isfinite(d) & (d > 0)
