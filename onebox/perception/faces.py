@@ -505,13 +505,19 @@ class _Reading:
             * along[:, :, np.newaxis, :]
         )
 
+    def _seen(
+        self, rows: npt.NDArray[np.intp], cols: npt.NDArray[np.intp]
+    ) -> tuple[Float64Array, Float64Array]:
+        """The depth at these pixels, and the points seen there (optical frame, ... x 3)."""
+        d = self.depth[rows, cols].astype(np.float64)
+        across_r, down_r = self.lens.rays(self.depth.shape[1], self.depth.shape[0])
+        return d, np.stack([across_r[cols] * d, down_r[rows] * d, d], axis=-1)
+
     def height_at(self, rows: npt.NDArray[np.intp], cols: npt.NDArray[np.intp]) -> Float64Array:
         """The height above the plane of the surface seen at these pixels (NaN: no reading)."""
-        d = self.depth[rows, cols].astype(np.float64)
-        d[~(d > 0)] = np.nan
-        across_r, down_r = self.lens.rays(self.depth.shape[1], self.depth.shape[0])
-        xyz = np.stack([across_r[cols] * d, down_r[rows] * d, d], axis=-1)
+        d, xyz = self._seen(rows, cols)
         height: Float64Array = xyz @ self.basis[2] + self.camera_height_m
+        height[~(d > 0)] = np.nan
         return height
 
     def __call__(self, edge_mid: Float64Array) -> tuple[Float64Array, BoolArray, Float64Array]:
@@ -539,11 +545,9 @@ class _Reading:
         vi = np.where(inside, vi, 0).astype(np.intp)
         self.pixels = (vi, ui)
         self.uv = (u, v)
-        d = self.depth[vi, ui].astype(np.float64)
+        d, seen_xyz = self._seen(vi, ui)
         with np.errstate(invalid="ignore"):
             seen = inside & np.isfinite(d) & (d > 0)
-        across_r, down_r = lens.rays(cols_n, rows_n)
-        seen_xyz = np.stack([across_r[ui] * d, down_r[vi] * d, d], axis=-1)
         a = seen_xyz @ e1 - edge_mid[:, :, np.newaxis, np.newaxis, 0]
         b = seen_xyz @ e2 - edge_mid[:, :, np.newaxis, np.newaxis, 1]
         self.seen_height = seen_xyz @ normal + self.camera_height_m
