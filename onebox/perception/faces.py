@@ -279,13 +279,10 @@ def _bled(
     last = samples - 1 - np.argmax(face[:, ::-1], axis=1)
     # The pixels a few on past the face's last point, the surface seen there lower.
     steps = np.arange(1.0, 1.0 + RUN)
-    pu = np.rint(u[(*line, last)][:, np.newaxis] + nu[:, np.newaxis] * steps)
-    pv = np.rint(v[(*line, last)][:, np.newaxis] + nv[:, np.newaxis] * steps)
-    rows_n, cols_n = reading.depth.shape
-    inside = np.isfinite(pu) & np.isfinite(pv) & (pu >= 0) & (pu < cols_n) & (pv >= 0)
-    inside &= pv < rows_n
-    pu = np.where(inside, pu, 0).astype(np.intp)
-    pv = np.where(inside, pv, 0).astype(np.intp)
+    inside, pv, pu = reading.pixel_of(
+        u[(*line, last)][:, np.newaxis] + nu[:, np.newaxis] * steps,
+        v[(*line, last)][:, np.newaxis] + nv[:, np.newaxis] * steps,
+    )
     with np.errstate(invalid="ignore"):
         inside &= (
             reading.height_at(pv, pu) < (reading.seen_height[line][at, last] - tol)[:, np.newaxis]
@@ -505,6 +502,22 @@ class _Reading:
             * along[:, :, np.newaxis, :]
         )
 
+    def pixel_of(
+        self, u: Float64Array, v: Float64Array, also: BoolArray | None = None
+    ) -> tuple[BoolArray, npt.NDArray[np.intp], npt.NDArray[np.intp]]:
+        """Whether the points at (u, v) (columns, rows) fall in the picture (and ``also``
+        holds), and the pixel each falls in (rows, columns; 0, 0 where not)."""
+        rows_n, cols_n = self.depth.shape
+        ui, vi = np.rint(u), np.rint(v)
+        inside = (ui >= 0) & (ui < cols_n) & (vi >= 0) & (vi < rows_n)
+        if also is not None:
+            inside &= also
+        return (
+            inside,
+            np.where(inside, vi, 0).astype(np.intp),
+            np.where(inside, ui, 0).astype(np.intp),
+        )
+
     def _seen(
         self, rows: npt.NDArray[np.intp], cols: npt.NDArray[np.intp]
     ) -> tuple[Float64Array, Float64Array]:
@@ -524,7 +537,6 @@ class _Reading:
         """For faces through ``edge_mid`` (N x 4 x 2): how far out past the face's plane the
         surface seen at each point lies (N x 4 x L x S), whether it is seen, and each line's
         extent in pixels, top to bottom (N x 4 x L)."""
-        rows_n, cols_n = self.depth.shape
         lens = self.lens
         e1, e2, normal = self.basis
         feet = edge_mid[:, :, np.newaxis, :] + self.along  # N x 4 x L x 2
@@ -538,11 +550,8 @@ class _Reading:
         with np.errstate(divide="ignore", invalid="ignore"):
             u = lens.fx * xyz[..., 0] / z + lens.cx
             v = lens.fy * xyz[..., 1] / z + lens.cy
-        ui, vi = np.rint(u), np.rint(v)
-        inside = (z > 0) & (ui >= 0) & (ui < cols_n) & (vi >= 0) & (vi < rows_n)
+        inside, vi, ui = self.pixel_of(u, v, z > 0)
         span_px = np.hypot(u[..., 0] - u[..., -1], v[..., 0] - v[..., -1])
-        ui = np.where(inside, ui, 0).astype(np.intp)
-        vi = np.where(inside, vi, 0).astype(np.intp)
         self.pixels = (vi, ui)
         self.uv = (u, v)
         d, seen_xyz = self._seen(vi, ui)
