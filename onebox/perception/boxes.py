@@ -2,12 +2,14 @@
 
 Contract: :func:`find_boxes` takes a depth picture (H x W float32 metres; NaN, 0, negative and
 inf are no reading), the lens (CameraInfo convention: the middle of pixel u is at u), the
-camera's pose (optical frame -> world, 4 x 4) or None, optionally the colour picture aligned
-with the depth pixel for pixel (H x W x 3 uint8), and :class:`FinderSettings`. It returns
-:class:`Found`: the support plane and the boxes, highest top first, in the world frame with a
-pose and in the optical frame without one ("up" is then the support normal, toward the camera).
-:class:`BoxFinder` does the same for a stream, keeping the support while it still fits and
-giving each box an id that stays while the box does not move. No I/O here.
+camera's pose (optical frame -> world, 4 x 4) or None, optionally the colour picture of the
+same size (H x W x 3 uint8) and how many whole pixels it lies off the depth, and
+:class:`FinderSettings`. It returns :class:`Found`: the support plane and the boxes, highest top
+first, in the world frame with a pose and in the optical frame without one ("up" is then the
+support normal, toward the camera). :class:`BoxFinder` does the same for a stream, keeping the
+support while it still fits, measuring how far the colour lies off the depth
+(:mod:`onebox.perception.register`) on its first picture and every ``register_every`` after,
+and giving each box an id that stays while the box does not move. No I/O here.
 
 How a picture is read (whole-array work; Python loops only over tops, a few scalars each).
 Steps 2 to 5 are :mod:`onebox.perception.tops`, step 6 :mod:`onebox.perception.bases`; this
@@ -108,7 +110,7 @@ import numpy as np
 import numpy.typing as npt
 
 from onebox.geometry import Intrinsics
-from onebox.perception import bases, segment, tops
+from onebox.perception import bases, register, segment, tops
 from onebox.perception.support import (
     Support,
     fit_support,
@@ -177,10 +179,14 @@ def find_boxes(
     colour: npt.NDArray[np.uint8] | None = None,
     settings: FinderSettings = FinderSettings(),
     support: Support | None = None,
+    colour_shift: tuple[int, int] = (0, 0),
 ) -> Found:
-    """Every box in the picture (see the module docstring); ``support`` skips the plane fit."""
+    """Every box in the picture (see the module docstring); ``support`` skips the plane fit;
+    ``colour_shift`` is how far the colour lies off the depth (:mod:`register`)."""
     depth = np.asarray(depth_m, dtype=np.float32)
     frame = "world" if camera_to_world is not None else "camera"
+    if colour is not None:
+        colour = register.in_register(colour, colour_shift)
     stride = _stride(depth.shape, settings.max_pixels)
     if stride > 1:
         # Pixel k * u' is pixel u' of the coarse picture: its ray is unchanged, so the lens
@@ -477,7 +483,8 @@ def _vec(v: Float64Array) -> Vec3:
 
 class BoxFinder:
     """:func:`find_boxes` for a stream: keeps the support while the camera does not move and it
-    still fits (checked on the grid sample), and gives each box a stable ``id``."""
+    still fits (checked on the grid sample), measures how far the colour lies off the depth
+    now and then, and gives each box a stable ``id``."""
 
     def __init__(self, settings: FinderSettings = FinderSettings()) -> None:
         self.settings = settings
@@ -487,6 +494,10 @@ class BoxFinder:
         self._last: list[Box] = []
         self._next_id = 0
         self.refits = 0
+        self.registration = register.Registration(settings.colour_shift or (0, 0))
+        """The colour's shift against the depth, as last measured (or as set)."""
+        self._coloured = 0
+        """Pictures with colour read since the lens last changed."""
 
     def __call__(
         self,
@@ -502,6 +513,8 @@ class BoxFinder:
             and np.allclose(self._pose, camera_to_world, atol=1e-6)
         )
         support = self._support
+        if lens != self._lens:
+            self._coloured = 0
         if (
             support is None
             or not same_pose
@@ -522,9 +535,30 @@ class BoxFinder:
         if support is None:
             self._last = []
             return Found(None, [], "world" if camera_to_world is not None else "camera")
-        found = find_boxes(depth, lens, camera_to_world, colour, self.settings, support)
+        if colour is not None and self.settings.colour_shift is None:
+            self._register(depth, colour, support)
+        found = find_boxes(
+            depth,
+            lens,
+            camera_to_world,
+            colour,
+            self.settings,
+            support,
+            self.registration.shift,
+        )
         boxes = self._identify(found.boxes)
         return Found(found.support, boxes, found.frame)
+
+    def _register(
+        self, depth: Float32Array, colour: npt.NDArray[np.uint8], support: Support
+    ) -> None:
+        """Measure the colour's shift on the first picture and every ``register_every`` after;
+        a later measurement replaces the shift kept only if it is sure."""
+        if self._coloured % max(self.settings.register_every, 1) == 0:
+            measured = register.colour_offset(depth, colour, support.sigma_m)
+            if measured.sure or self._coloured == 0:
+                self.registration = measured
+        self._coloured += 1
 
     def _identify(self, boxes: list[Box]) -> list[Box]:
         taken: set[int] = set()

@@ -97,6 +97,11 @@ class FinderSettings:
     max_pixels: int | None = MAX_PIXELS
     """Larger pictures are read at every k-th pixel (k = 2 for 1280 x 720) to keep camera rate;
     sizes are then good to that coarser footprint. None reads every pixel."""
+    colour_shift: tuple[int, int] | None = None
+    """BoxFinder: the colour picture's shift against the depth, (dy, dx) whole pixels (see
+    :mod:`onebox.perception.register`); None measures it from the pictures."""
+    register_every: int = 30
+    """BoxFinder: measure the colour's shift on the first picture and every this many after."""
 
 
 PAD = 12
