@@ -55,7 +55,7 @@ from scipy.spatial.transform import Rotation
 from onebox import bus, geometry, keys, memory, pictures, settings, sync
 from onebox.errors import SettingError
 from onebox.geometry import FrameError, FrameTree, matrix_of
-from onebox.perception import seed
+from onebox.perception import register, seed
 from onebox.perception.boxes import Box, BoxFinder, FinderSettings, Found
 from onebox.perception.tops import MAX_PIXELS
 from onebox.rectify import Rectifier, lens_of
@@ -112,6 +112,20 @@ def workspace_limits(text: str) -> tuple[tuple[float, float], ...] | None:
     return pairs
 
 
+def colour_shift(text: str) -> tuple[int, int] | None:
+    """``DY,DX`` whole pixels, or ``auto`` (None: measured from the pictures)."""
+    if text.strip() == "auto":
+        return None
+    parts = text.split(",")
+    try:
+        dy, dx = (int(part) for part in parts)
+    except ValueError:
+        raise ValueError(f"{text!r}: expected auto or two whole numbers DY,DX") from None
+    if max(abs(dy), abs(dx)) > register.REACH_PX * 4:
+        raise ValueError(f"{text!r}: more than {register.REACH_PX * 4} pixels off")
+    return dy, dx
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     bus.add_arguments(parser)
     group = parser.add_argument_group("locator")
@@ -160,6 +174,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         choices=("boxes", "seed"),
         default="boxes",
         help="boxes: every box, oriented (the default); seed: the seed's one-box measurement",
+    )
+    settings.add(
+        group,
+        "colour_shift",
+        "auto",
+        "how far the colour picture lies off the depth, DY,DX whole pixels (its pixel "
+        "(v + DY, u + DX) shows the depth's (v, u)); auto measures it from the pictures; 0,0 "
+        "takes them as aligned; write --colour-shift=-1,2 when the first number is negative",
+        kind=str,
     )
     group.add_argument(
         "--no-colour",
@@ -216,6 +239,7 @@ class LocatorSettings:
     workspace: tuple[tuple[float, float], ...] | None = None
     max_height_m: float | None = None
     max_pixels: int = MAX_PIXELS
+    colour_shift: tuple[int, int] | None = None
     method: str = "boxes"
     use_colour: bool = True
     slop_ns: int = 0
@@ -250,6 +274,10 @@ class LocatorSettings:
             workspace = workspace_limits(args.workspace)
         except ValueError as e:
             raise SettingError(f"workspace {e}") from e
+        try:
+            shift = colour_shift(args.colour_shift)
+        except ValueError as e:
+            raise SettingError(f"colour_shift {e}") from e
         return cls(
             world_frame=args.world_frame,
             table_z_m=args.table_z,
@@ -258,6 +286,7 @@ class LocatorSettings:
             workspace=workspace,
             max_height_m=args.max_height,
             max_pixels=args.max_pixels,
+            colour_shift=shift,
             method=args.method,
             use_colour=args.colour,
             slop_ns=round(args.slop_ms * 1e6),
@@ -276,6 +305,7 @@ class LocatorSettings:
             workspace=self.workspace,  # type: ignore[arg-type]
             max_height_m=self.max_height_m,
             max_pixels=self.max_pixels or None,
+            colour_shift=self.colour_shift,
         )
 
 
@@ -481,6 +511,7 @@ class Locator:
         """The camera's frame and world_frame <- it as last used, to say when tf_static moves it."""
         self._said_rectified = False
         self._finder = BoxFinder(config.finder())
+        self._said_shift = self._finder.registration.shift
         self._started_s = time.monotonic()
         self._detections = b.publisher(keys.DETECTIONS, Detection3DArray)
         self._support = b.publisher(keys.SUPPORT, SupportPlane)
@@ -700,6 +731,7 @@ class Locator:
                 colour = lens.rectifier.colour(colour)
             found_boxes = self._finder(depth_m, lens.intrinsics, camera_to_world, colour)
             self._count(started)
+            self._say_registration()
             self._detections.publish(detection_array(found_boxes, frame.stamp_ns, frame_id))
             support = support_message(found_boxes, frame.stamp_ns, frame_id)
             if support is not None:
@@ -707,6 +739,19 @@ class Locator:
             result = Result(frame.stamp_ns, found=found_boxes, frame=frame_id)
         self.published += 1
         self.latest = result
+
+    def _say_registration(self) -> None:
+        measured = self._finder.registration
+        if measured.shift != self._said_shift:
+            self._said_shift = measured.shift
+            log.info(
+                "%s: the colour picture lies %s (measured on %d depth jumps, %.1f standard "
+                "errors); it is moved back before it is read (--colour-shift sets it)",
+                self._keys["colour"],
+                measured,
+                measured.jumps,
+                measured.t,
+            )
 
     def _colour_for(self, frame: DepthFrame) -> npt.NDArray[np.uint8] | None:
         if not self._config.use_colour:

@@ -184,11 +184,21 @@ def test_no_flag_abbreviations():
     assert done.returncode == 2 and "unknown command '--vers'" in done.stderr
 
 
-def test_locator_refuses_a_negative_max_pixels_in_one_line():
-    """--max-pixels -1: one line naming the setting, exit 2."""
-    done = onebox("locator", "--max-pixels", "-1")
+@pytest.mark.parametrize(
+    ("flag", "says"),
+    [
+        (["--max-pixels", "-1"], "max_pixels -1: must be 0 (every pixel) or more"),
+        (["--colour-shift", "1"], "colour_shift '1': expected auto or two whole numbers DY,DX"),
+        (["--colour-shift=-1,x"], "colour_shift '-1,x': expected auto or two whole numbers DY,DX"),
+        (["--colour-shift", "20,0"], "colour_shift '20,0': more than 12 pixels off"),
+    ],
+)
+def test_locator_refuses_a_setting_it_cannot_use_in_one_line(flag, says):
+    """--max-pixels -1, a colour shift that is not two whole numbers or is far off: one line
+    naming the setting, exit 2."""
+    done = onebox("locator", *flag)
     assert done.returncode == 2
-    assert done.stderr == "onebox locator: max_pixels -1: must be 0 (every pixel) or more\n"
+    assert done.stderr == f"onebox locator: {says}\n"
 
 
 def test_a_mistyped_command_suggests_the_right_one():
