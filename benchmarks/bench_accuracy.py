@@ -48,6 +48,7 @@ ACROSS_TILT_DEG = 45.0
 COLOUR_OFF = {
     "2 px down and 1 px right of the depth": (2, 1),
     "1 px up and 2 px left of the depth": (-1, -2),
+    "1 px down and 1 px right of the depth": (1, 1),
 }
 """The colour picture rolled (rows, columns) against the depth: a real camera's colour is
 registered with its depth to a pixel or two."""
@@ -178,6 +179,11 @@ def main() -> None:
         ("clutter, azure_kinect", [spec.load(SCENES / "clutter.toml")], PRESETS["azure_kinect"]),
         ("random, noise-free, colour 2 px down and 1 px right of the depth", None, PRESETS["none"]),
         ("random, d435, colour 1 px up and 2 px left of the depth", None, PRESETS["d435"]),
+        (
+            "random, azure_kinect, colour 1 px down and 1 px right of the depth",
+            None,
+            PRESETS["azure_kinect"],
+        ),
         ("random, noise-free, depth only", None, PRESETS["none"]),
         ("random, d435, depth only", None, PRESETS["d435"]),
         ("random looked at across, 45 degrees, noise-free, depth only", None, PRESETS["none"]),

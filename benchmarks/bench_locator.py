@@ -34,7 +34,8 @@ import numpy as np
 
 from onebox.geometry import to_world
 from onebox.perception import seed as seed_method
-from onebox.perception.boxes import BoxFinder, find_boxes
+from onebox.perception.boxes import BoxFinder, FinderSettings, find_boxes
+from onebox.perception.register import colour_offset
 from onebox.perception.support import fit_support, support_holds
 from onebox.rectify import lens_of
 from onebox.testing.raycast import (
@@ -120,6 +121,17 @@ def speed(repeats: int) -> None:
         print(
             f"{'':<20} support plane: fit {fit[0]:.2f}/{fit[1]:.2f} ms, "
             f"check kept {check[0]:.2f}/{check[1]:.2f} ms ({fit[0] / check[0]:.0f}x cheaper)"
+        )
+        off = np.roll(colour, (2, -1), axis=(0, 1))
+        shift = timed(
+            lambda: colour_offset(depth, off, support.sigma_m),  # noqa: B023
+            repeats,
+        )
+        every = FinderSettings().register_every
+        print(
+            f"{'':<20} the colour's shift against the depth: measured "
+            f"{shift[0]:.2f}/{shift[1]:.2f} ms ({colour_offset(depth, off, support.sigma_m)}; "
+            f"a BoxFinder measures it every {every} pictures: {shift[0] / every:.2f} ms a picture)"
         )
 
 
