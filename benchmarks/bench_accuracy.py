@@ -12,7 +12,8 @@ seed's world), renders colour and depth with MuJoCo, adds the depth noise (the p
 D435 whose errors come in lumps 3 pixels wide), and runs the box finder the locator runs
 (``onebox.perception.boxes.BoxFinder``) on the picture, the lens the sim publishes and the
 camera's pose (on the depth alone, in the cases saying "depth only": a camera with no
-colour; with the colour a pixel or two off the depth where the case says so), and judges
+colour; with the colour a pixel or two off the depth, or through a colour sensor's noise,
+where the case says so), and judges
 what it finds against the ground truth (:mod:`onebox.testing.judged` says how: found,
 missed, false; a box partly hidden under another is judged on its height only).
 
@@ -52,6 +53,8 @@ COLOUR_OFF = {
 }
 """The colour picture rolled (rows, columns) against the depth: a real camera's colour is
 registered with its depth to a pixel or two."""
+COLOUR_NOISE = 8.0
+"""A colour camera's sensor noise in dim light, sigma in levels of 0..255 a channel."""
 LUMPY_D435 = replace(PRESETS["d435"], correlation_px=3.0)
 """A D435 whose errors come in lumps 3 pixels wide (its matching window, a depth filter)."""
 
@@ -183,6 +186,21 @@ def main() -> None:
             "random, azure_kinect, colour 1 px down and 1 px right of the depth",
             None,
             PRESETS["azure_kinect"],
+        ),
+        (
+            "random, d435, the colour's noise 8 levels",
+            None,
+            replace(PRESETS["d435"], colour_sigma=COLOUR_NOISE),
+        ),
+        (
+            "random pallets, noise-free, the colour's noise 8 levels",
+            None,
+            replace(PRESETS["none"], colour_sigma=COLOUR_NOISE),
+        ),
+        (
+            "random pallets, d435, the colour's noise 8 levels",
+            None,
+            replace(PRESETS["d435"], colour_sigma=COLOUR_NOISE),
         ),
         ("random, noise-free, depth only", None, PRESETS["none"]),
         ("random, d435, depth only", None, PRESETS["d435"]),

@@ -384,7 +384,7 @@ def publish_capture(
         capture = renderer.render(data, cam.spec.name)
         if clean is None:
             clean = capture.depth_m
-        colour = pictures.rgb8_image(capture.rgb, header)
+        colour = pictures.rgb8_image(cam.noise.colour(capture.rgb), header)
         depth = pictures.depth_image(cam.noise.apply(capture.depth_m), header, depth_encoding)
         cam.depth.publish(depth)
         cam.colour.publish(colour)

@@ -12,7 +12,7 @@ import pytest
 from scipy import ndimage
 
 from onebox.geometry import Intrinsics
-from onebox.perception import register, tops
+from onebox.perception import register, segment, tops
 from onebox.perception.boxes import BoxFinder, FinderSettings, find_boxes
 from onebox.perception.segment import median3
 from onebox.perception.support import Support, fit_support, lump_width, noise_against
@@ -35,7 +35,7 @@ from onebox.testing.raycast import (
     table_on_legs,
     taped,
 )
-from onebox.world.noise import PRESETS, DepthNoise
+from onebox.world.noise import PRESETS, DepthNoise, NoiseSpec
 
 
 def random_boxes(rng: np.random.Generator, count: int, spread_m: float) -> tuple[Box, ...]:
@@ -415,6 +415,38 @@ def test_touching_cartons_split_by_colour():
     for box, true in match(found.boxes, (a, b)):
         assert math.dist(box.centre, true.centre) < 0.003
         assert box.size[0] == pytest.approx(0.1, abs=0.004)
+
+
+@pytest.mark.parametrize("colour_sigma", [4.0, 8.0, 12.0])
+def test_touching_cartons_split_by_colour_through_the_colours_noise(colour_sigma):
+    """The same two cartons through a colour camera's sensor noise of a few to twelve levels
+    a channel: the noise's own steps between neighbours are no edges, so the tops do not
+    crumble into specks, and the cartons' edge still splits them."""
+    plane = Plane()
+    a = box_on(plane, -0.05, 0.0, (0.1, 0.08, 0.06), 0.0, colour=(180, 140, 90))
+    b = box_on(plane, 0.05, 0.0, (0.1, 0.08, 0.06), 0.0, colour=(150, 115, 70))
+    camera = Camera.tilted(0.6, 10.0, width=640, height=480)
+    depth, colour = render(Scene(camera, plane, (a, b)))
+    noise = DepthNoise(NoiseSpec(colour_sigma=colour_sigma), depth.shape)
+    found = find_boxes(depth, camera.lens, camera.camera_to_world, noise.colour(colour))
+    assert len(found.boxes) == 2, [box.size for box in found.boxes]
+    for box, true in match(found.boxes, (a, b)):
+        assert math.dist(box.centre, true.centre) < 0.003
+        assert box.size[0] == pytest.approx(0.1, abs=0.004)
+
+
+def test_the_edge_step_follows_the_colours_noise():
+    """Clean shades keep the colour step; noise raises it to 2.5 spreads of the neighbours'
+    differences (sqrt 2 times the grey's sigma), wherever edges are a small share."""
+    shades = np.zeros((240, 320), np.int16)
+    shades[:, 160:] = 100
+    shades[120:] += 40
+    assert segment.edge_step(shades, 12.0) == 12.0
+    rng = np.random.default_rng(5)
+    for sigma in (2.0, 6.0, 10.0):
+        noisy = shades + np.rint(rng.normal(0.0, sigma, shades.shape)).astype(np.int16)
+        want = max(12.0, segment.EDGE_NOISE_SPREADS * math.sqrt(2.0) * sigma)
+        assert segment.edge_step(noisy, 12.0) == pytest.approx(want, rel=0.08)
 
 
 @pytest.mark.parametrize(

@@ -120,3 +120,24 @@ def test_the_same_seed_gives_the_same_noise() -> None:
         assert first.apply(clean).tobytes() == second.apply(clean).tobytes()
     other = DepthNoise(dataclasses.replace(spec, seed=1), SHAPE).apply(clean)
     assert other.tobytes() != a[0].tobytes()
+
+
+def test_colour_noise_has_its_sigma_and_leaves_the_depth_alone() -> None:
+    """colour_sigma errs every channel of every pixel by a normal error of that sigma (whole
+    levels, clipped to 0..255), differently each capture; without it the colour is untouched,
+    and it changes nothing of the depth's noise but its draws."""
+    grey = np.full((*SHAPE, 3), 128, np.uint8)
+    clean = ramp(1.0, 1.0)
+    assert DepthNoise(PRESETS["d435"], SHAPE).colour(grey) is grey
+    spec = dataclasses.replace(PRESETS["none"], colour_sigma=6.0)
+    noise = DepthNoise(spec, SHAPE)
+    assert noise.apply(clean) is clean
+    first, second = noise.colour(grey), noise.colour(grey)
+    assert first.dtype == np.uint8 and first.shape == grey.shape
+    assert np.array_equal(grey, np.full_like(grey, 128))  # the input is not changed
+    err = first.astype(np.float64) - 128
+    assert np.sqrt(np.mean(err**2)) == pytest.approx(6.0, rel=0.10)
+    assert abs(err.mean()) < 0.1
+    assert not np.array_equal(first, second)
+    bright = noise.colour(np.full((*SHAPE, 3), 252, np.uint8))
+    assert bright.max() == 255 and (bright == 255).mean() > 0.2

@@ -237,9 +237,11 @@ def plateaus(
     cut = depth_cut
     colour_cut: BoolArray | None = None
     grey = None
+    edge_step = settings.colour_step
     if colour is not None:
         grey = segment.grey(colour[crop])
-        colour_cut = np.pad(segment.colour_breaks(grey, settings.colour_step), pad)
+        edge_step = segment.edge_step(grey, settings.colour_step)
+        colour_cut = np.pad(segment.colour_breaks(grey, edge_step), pad)
         cut = depth_cut | colour_cut
         grey = np.pad(grey, pad, mode="edge")
     labels, count = ndimage.label(stand & ~cut)
@@ -375,6 +377,7 @@ def plateaus(
             None if colour_cut is None else colour_cut.reshape(-1),
             None if grey is None else grey.reshape(-1),
             settings.colour_step,
+            edge_step,
             lens,
             support,
             depth.shape,
@@ -1867,6 +1870,7 @@ def _seams(
     cut_flat: BoolArray | None,
     grey_flat: npt.NDArray[np.int16] | None,
     colour_step: float,
+    edge_step: float,
     lens: Intrinsics,
     support: Support,
     shape: tuple[int, int],
@@ -1875,7 +1879,9 @@ def _seams(
     far down a gap, cross from side to side, parallel to a side of their rectangle, with the
     top going on past them on both sides (the seams between cartons of one shade, along and
     across; cartons a pixel or less apart, whose gap the pixels see down at every few along
-    it): per such top, its label and each of its pixels' cell between the lines (0, 1, ...)."""
+    it): per such top, its label and each of its pixels' cell between the lines (0, 1, ...).
+    A dark line is one darker than ``edge_step`` (the colour's noise allowing); the shades
+    either side of a seam, means of many pixels, are alike within ``colour_step``."""
     rows_n, cols_n = shape
     across, down = lens.rays(cols_n, rows_n)
     basis = plane_basis(support, None)
@@ -1906,7 +1912,7 @@ def _seams(
         beside = flat + offset
         lines |= depth_cut_flat[beside] & (top_flat[beside] != label) & (h_flat[beside] < deep)
     if grey_flat is not None and cut_flat is not None:
-        lines |= cut_flat[flat] | segment.valleys(grey_flat, flat, w, colour_step)
+        lines |= cut_flat[flat] | segment.valleys(grey_flat, flat, w, edge_step)
     # Each pixel's ray met with the top's plane, not its reading: a stereo camera's noise
     # along the ray would smear the line over several footprints.
     top_height = np.repeat([p.height_m for p, _ in long], sizes)

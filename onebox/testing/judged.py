@@ -54,7 +54,8 @@ def render_scene(scene: SceneDesc, noise: NoiseSpec) -> Rendered:
     with SceneRenderer(model, [main]) as renderer:
         capture = renderer.render(data, main.name)
     clean = capture.depth_m
-    depth = DepthNoise(noise, clean.shape).apply(clean)
+    camera_noise = DepthNoise(noise, clean.shape)
+    depth = camera_noise.apply(clean)
     pose = optical_pose(model, data, main.name)
     p, q = pose.position, pose.orientation
     matrix = np.eye(4)
@@ -65,7 +66,7 @@ def render_scene(scene: SceneDesc, noise: NoiseSpec) -> Rendered:
     rays = spec.pixel_rays(scene.camera)
     whole = [int(np.isfinite(spec.top_depths(scene.camera, b, rays)).sum()) for b in placed]
     lens = Intrinsics.from_k(camera_info(main).k)
-    return Rendered(depth, capture.rgb, lens, matrix, truth, whole)
+    return Rendered(depth, camera_noise.colour(capture.rgb), lens, matrix, truth, whole)
 
 
 @dataclass

@@ -19,6 +19,11 @@ The steps, each off at its zero value, in the order they are applied:
   (30-80 % of the true distance), alone or in square clumps up to ``clump_px`` across, as
   structured-light cameras give on dark or shiny spots.
 
+``colour_sigma`` adds a camera sensor's noise to the colour picture
+(:meth:`DepthNoise.colour`): a normal error of that sigma (levels of 0..255) on each channel of
+each pixel, rounded and clipped. Real colour in a lit room errs by a few levels; in dim light,
+at a high gain, by ten or more. The presets leave the colour clean.
+
 ``correlation_px`` makes the normal error lumpy: the pool is smoothed once by a Gaussian of
 that sigma, in pixels, and scaled back to unit variance, so neighbours err together as behind
 a stereo camera's matching window or a depth filter, at the same sigma.
@@ -54,6 +59,7 @@ class NoiseSpec:
     speckle_share: float = 0.0
     clump_px: int = 1
     correlation_px: float = 0.0
+    colour_sigma: float = 0.0
     seed: int = 0
 
     @property
@@ -174,6 +180,7 @@ class DepthNoise:
         self._rng = np.random.default_rng([spec.seed, stream])
         size = shape[0] * shape[1]
         self._normals: Float32Array | None = None
+        self._colour_normals: npt.NDArray[np.int16] | None = None
         if spec.sigma_m or spec.a or spec.b:
             # A pool four pictures long, read from a random offset each capture (with a random
             # sign): one capture's errors are independent normals, at a tenth of the cost.
@@ -186,6 +193,22 @@ class DepthNoise:
                 pool = ndimage.gaussian_filter(pool, spec.correlation_px, mode="wrap")
                 pool /= pool.std()
                 self._normals = pool.reshape(-1)
+
+    def colour(self, rgb: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
+        """A noisy copy of ``rgb`` (H x W x 3) with ``colour_sigma``; the input is not changed."""
+        sigma = self.spec.colour_sigma
+        if not sigma:
+            return rgb
+        if self._colour_normals is None or self._colour_normals.size < 2 * rgb.size:
+            # Like the depth's: a pool two pictures long, in whole levels, read from a random
+            # offset each capture.
+            pool = self._rng.standard_normal(2 * rgb.size, dtype=np.float32) * np.float32(sigma)
+            self._colour_normals = np.rint(pool).astype(np.int16)
+        offset = int(self._rng.integers(0, self._colour_normals.size - rgb.size + 1))
+        noisy = rgb.astype(np.int16)
+        noisy += self._colour_normals[offset : offset + rgb.size].reshape(rgb.shape)
+        np.clip(noisy, 0, 255, out=noisy)
+        return noisy.astype(np.uint8)
 
     def apply(self, depth_m: Float32Array) -> Float32Array:
         """A noisy copy of ``depth_m`` (metres, NaN = no reading); the input is not changed."""
