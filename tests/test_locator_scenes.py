@@ -49,17 +49,27 @@ def run_scene(processes, inbox: Inbox, test_bus, scene: str, *flags: str):
 
 
 @pytest.mark.parametrize(
-    ("scene", "flags"),
+    ("scene", "flags", "colour_sigma"),
     [
-        ("scene/pallet.toml", ()),
-        ("scene/clutter.toml", ()),
-        ("scene/pallet.toml", ("--depth-encoding", "16UC1")),
+        ("scene/pallet.toml", (), 0.0),
+        ("scene/clutter.toml", (), 0.0),
+        ("scene/pallet.toml", ("--depth-encoding", "16UC1"), 0.0),
+        ("scene/pallet.toml", (), 8.0),
     ],
 )
-def test_every_carton_comes_out_right(processes, inbox, test_bus, scene, flags):
+def test_every_carton_comes_out_right(
+    processes, inbox, test_bus, tmp_path, scene, flags, colour_sigma
+):
     """Every box whose whole top the camera sees (95 % of its pixels, not a platform) is
     reported, within 10 mm and 15 mm; every report is some true box (a partly hidden one may
-    be reported or not), never the pallet, the machine, the cylinders or the arm."""
+    be reported or not), never the pallet, the machine, the cylinders or the arm. Also with
+    the colour through a sensor's noise of 8 levels (the scene's [noise] ``colour_sigma``)."""
+    if colour_sigma:
+        noisy = tmp_path / "noisy.toml"
+        text = (ROOT / scene).read_text()
+        assert text.rstrip().endswith('model = "d435"'), "[noise] is the scene's last table"
+        noisy.write_text(f"{text.rstrip()}\ncolour_sigma = {colour_sigma}\n")
+        scene = str(noisy)
     (detections, truth), locator = run_scene(processes, inbox, test_bus, scene, *flags)
     assert detections.header.frame_id == "world"
     boxes = list(truth.boxes)
