@@ -6,7 +6,7 @@ under a camera looking straight down (scene/one_box.toml says the same). The len
 size settings override the scene's. Steps MuJoCo and, at ``rate_hz`` of simulated time, renders
 colour and depth of both cameras in one pass each, adds the depth noise of the scene's [noise]
 (or --noise MODEL: none, gaussian, axial, quantise, edge_dropout, speckle, d435, azure_kinect)
-and publishes (keys under ``--namespace``):
+and its colour_sigma's noise to the colour, and publishes (keys under ``--namespace``):
 
   camera/image_raw               Image rgb8, width x height (default 320 x 240)
   camera/depth/image_raw         Image 32FC1, metres; NaN = no reading (outside 0.05-3.0 m),
