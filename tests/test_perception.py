@@ -402,13 +402,20 @@ def test_stacked_box_reports_what_it_stands_on():
     assert math.dist(top.centre, upper.centre) < 0.002
 
 
-def test_touching_cartons_split_by_colour():
-    """Two touching cartons of one height: one merged box from depth alone, two with colour."""
+def touching_cartons():
+    """Two touching cartons of one height and two browns, seen from 0.6 m: the cartons, the
+    camera and its depth and colour pictures."""
     plane = Plane()
     a = box_on(plane, -0.05, 0.0, (0.1, 0.08, 0.06), 0.0, colour=(180, 140, 90))
     b = box_on(plane, 0.05, 0.0, (0.1, 0.08, 0.06), 0.0, colour=(150, 115, 70))
     camera = Camera.tilted(0.6, 10.0, width=640, height=480)
     depth, colour = render(Scene(camera, plane, (a, b)))
+    return (a, b), camera, depth, colour
+
+
+def test_touching_cartons_split_by_colour():
+    """Two touching cartons of one height: one merged box from depth alone, two with colour."""
+    (a, b), camera, depth, colour = touching_cartons()
     assert len(find_boxes(depth, camera.lens, camera.camera_to_world).boxes) == 1
     found = find_boxes(depth, camera.lens, camera.camera_to_world, colour)
     assert len(found.boxes) == 2
@@ -422,11 +429,7 @@ def test_touching_cartons_split_by_colour_through_the_colours_noise(colour_sigma
     """The same two cartons through a colour camera's sensor noise of a few to twelve levels
     a channel: the noise's own steps between neighbours are no edges, so the tops do not
     crumble into specks, and the cartons' edge still splits them."""
-    plane = Plane()
-    a = box_on(plane, -0.05, 0.0, (0.1, 0.08, 0.06), 0.0, colour=(180, 140, 90))
-    b = box_on(plane, 0.05, 0.0, (0.1, 0.08, 0.06), 0.0, colour=(150, 115, 70))
-    camera = Camera.tilted(0.6, 10.0, width=640, height=480)
-    depth, colour = render(Scene(camera, plane, (a, b)))
+    (a, b), camera, depth, colour = touching_cartons()
     noise = DepthNoise(NoiseSpec(colour_sigma=colour_sigma), depth.shape)
     found = find_boxes(depth, camera.lens, camera.camera_to_world, noise.colour(colour))
     assert len(found.boxes) == 2, [box.size for box in found.boxes]
