@@ -1,7 +1,7 @@
 """How right the boxes come out: the locator's finder on MuJoCo renders against the ground truth.
 
     python benchmarks/bench_accuracy.py [--scenes 30] [--empty 50] [--pallets 30] [--seed 1]
-        [--only NAME]
+        [--only NAME] [--max-pixels N]
 
 Builds each world the way ``onebox sim`` does (random scenes from seeds, 640 x 480 with an hfov
 of 60 degrees unless told otherwise; random loaded pallets from seeds
@@ -20,7 +20,8 @@ missed, false; a box partly hidden under another is judged on its height only).
 Prints, per case, median / p90 / worst of: the centre's error (mm, and as a share of the
 camera's distance), the yaw's (degrees, modulo the box's symmetry), length and width (mm,
 scaled to a camera 0.4 m away), height (mm), the height of boxes partly hidden under another;
-and the counts of found, missed and false boxes.
+and the counts of found, missed and false boxes. ``--max-pixels`` reads the pictures the way the
+locator's ``max_pixels`` setting does (at every k-th pixel when larger: faster, coarser).
 """
 
 from __future__ import annotations
@@ -72,10 +73,11 @@ def run_case(
     errors: Errors,
     colour: bool = True,
     colour_off: tuple[int, int] = (0, 0),
+    settings: FinderSettings | None = None,
 ) -> None:
     for scene in scenes:
         rendered = render_scene(scene, noise if noise is not None else scene.noise)
-        finder = BoxFinder(FinderSettings())
+        finder = BoxFinder(settings or FinderSettings())
         rgb = np.roll(rendered.rgb, colour_off, axis=(0, 1)) if colour else None
         started = time.perf_counter()
         found = finder(rendered.depth_m, rendered.lens, rendered.camera_to_world, rgb)
@@ -125,7 +127,18 @@ def main() -> None:
     parser.add_argument("--width", type=int, default=640, help="random scenes' pictures (640)")
     parser.add_argument("--height", type=int, default=480, help="random scenes' pictures (480)")
     parser.add_argument("--verbose", action="store_true", help="list missed and false boxes")
+    parser.add_argument(
+        "--max-pixels",
+        type=int,
+        default=FinderSettings().max_pixels,
+        metavar="N",
+        help="read pictures larger than N pixels at every k-th pixel, as the locator's "
+        f"max_pixels does (default {FinderSettings().max_pixels:,}; 0: every pixel)",
+    )
     args = parser.parse_args()
+    if args.max_pixels < 0:
+        parser.error(f"--max-pixels {args.max_pixels}: must be 0 (every pixel) or more")
+    settings = FinderSettings(max_pixels=args.max_pixels or None)
     seeds = range(args.seed, args.seed + args.scenes)
 
     def randoms(boxes: int, objects: int) -> list[SceneDesc]:
@@ -229,7 +242,14 @@ def main() -> None:
             continue
         errors = Errors()
         off = COLOUR_OFF.get(title.split(", colour ")[-1], (0, 0))
-        run_case(scenes, noise, errors, colour="depth only" not in title, colour_off=off)
+        run_case(
+            scenes,
+            noise,
+            errors,
+            colour="depth only" not in title,
+            colour_off=off,
+            settings=settings,
+        )
         report(title, errors, args.verbose)
 
 
