@@ -37,6 +37,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from onebox.perception.boxes import BoxFinder, FinderSettings
+from onebox.perception.tops import MAX_PIXELS
 from onebox.testing.judged import Judged, judge, render_scene
 from onebox.world import spec
 from onebox.world.noise import PRESETS, NoiseSpec
@@ -130,10 +131,10 @@ def main() -> None:
     parser.add_argument(
         "--max-pixels",
         type=int,
-        default=FinderSettings().max_pixels,
+        default=MAX_PIXELS,
         metavar="N",
         help="read pictures larger than N pixels at every k-th pixel, as the locator's "
-        f"max_pixels does (default {FinderSettings().max_pixels:,}; 0: every pixel)",
+        f"max_pixels does (default {MAX_PIXELS:,}; 0: every pixel)",
     )
     args = parser.parse_args()
     if args.max_pixels < 0:
