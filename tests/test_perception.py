@@ -1234,6 +1234,42 @@ def test_a_face_seen_nearly_edge_on_shows_no_seam_under_a_box_on_another():
     assert top.size[2] == pytest.approx(0.045, abs=0.002)
 
 
+def test_a_rim_at_one_height_is_a_ledge_at_that_height():
+    """A rim of a lower top all round a top, every reading at one height (clean depth): its
+    level is that height wherever the height falls among the histogram's bins (the window's
+    middle bin lay up to a tolerance and half a bin off such readings, and 147 of these 300
+    heights found no ledge)."""
+    n = 40
+    height = np.zeros((n, n), dtype=np.float32)
+    label = np.zeros((n, n), dtype=np.int32)
+    label[10:30, 10:30] = 1
+    flat = label.reshape(-1)
+    inside = np.flatnonzero(flat == 1)
+    outline = np.zeros(len(inside), dtype=bool)
+    for step in (1, -1, n, -n):
+        outline |= flat[inside + step] != 1
+    edge = inside[outline]
+    wrong = []
+    for rim in np.arange(0.03, 0.06, 0.0001, dtype=np.float32):
+        height[7:33, 7:33] = rim
+        height[10:30, 10:30] = 0.1
+        ledge = tops._ledges(
+            edge,
+            np.zeros(len(edge), dtype=np.int32),
+            flat,
+            height.reshape(-1),
+            n,
+            np.array([0.1]),
+            np.array([0.0015]),
+            np.array([0.001]),
+            FinderSettings(),
+            1,
+        )
+        if not abs(ledge[0] - rim) < 1e-5:
+            wrong.append(float(rim))
+    assert wrong == []
+
+
 @pytest.mark.parametrize("sigma_m", [0.0, 0.001])
 def test_a_box_between_lower_ones_touching_it_stands_on_the_table(sigma_m):
     """Cartons turned 45 degrees packed edge to edge: one 11 mm taller than the two it

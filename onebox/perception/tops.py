@@ -2152,7 +2152,7 @@ def _ledges(
     # Per top a histogram in bins of a third of the tolerance; a window of +-tol around each
     # bin; the highest window holding enough readings is the ledge.
     w = _windows(values, group, count, tol, lowest)
-    window, half, bin_m = w.counts, w.reach, w.bin_m
+    window, half = w.counts, w.reach
     bins = window.shape[1]
     columns = np.arange(bins)[np.newaxis, :]
     total = np.bincount(group, minlength=count)[:, np.newaxis]
@@ -2165,7 +2165,11 @@ def _ledges(
     top_bin = bins - 1 - np.argmax(enough[:, ::-1], axis=1)
     span = (columns <= top_bin[:, np.newaxis]) & (columns >= top_bin[:, np.newaxis] - 2 * half)
     peak = np.where(span, window, -1.0).argmax(axis=1)
-    centre = lowest + (peak + 0.5) * bin_m
+    # The mean of the readings in that window, then of those within the tolerance of it (the
+    # window's middle bin may lie a tolerance and half a bin off readings all in one bin).
+    near = np.abs(w.at - peak[group]) <= half[group, 0]
+    held = np.maximum(np.bincount(group[near], minlength=count), 1)
+    centre = np.bincount(group[near], weights=values[near], minlength=count) / held
     near = np.abs(values - centre[group]) < tol[group]
     sums = np.bincount(group[near], weights=values[near], minlength=count)
     number = np.bincount(group[near], minlength=count)
