@@ -11,7 +11,9 @@ Timed in one process, on the same pictures (ray-cast, answers known, 0.5 mm nois
 - seed, fast: the same answer from ``seed.locate_box`` (``onebox locator --method seed``);
 - boxes, plane kept: what ``onebox locator`` runs on each picture while the camera stays put
   (the support plane checked, not fitted again);
-- boxes, fresh: the same with the support plane fitted from scratch.
+- boxes, fresh: the same with the support plane fitted from scratch;
+- one labelling of the standing pixels the finder reads (``ndimage.label``): a floor under any
+  finder that splits a picture into objects with these libraries.
 
 Then, on ray-cast pictures with known answers: a noisy pallet, a cluttered desk, empty tables,
 a stream of still pictures (the ids), tables with only round things on them (tins upright
@@ -32,12 +34,14 @@ import math
 import time
 
 import numpy as np
+from scipy import ndimage
 
 from onebox.geometry import to_world
 from onebox.perception import seed as seed_method
 from onebox.perception.boxes import BoxFinder, FinderSettings, find_boxes
 from onebox.perception.register import colour_offset
 from onebox.perception.support import fit_support, support_holds
+from onebox.perception.tops import height_slope
 from onebox.rectify import lens_of
 from onebox.testing.raycast import (
     Box,
@@ -116,6 +120,16 @@ def speed(repeats: int) -> None:
             f"{name:<20} {written[0]:8.2f}/{written[1]:6.2f}  {seed[0]:7.2f}/{seed[1]:6.2f}  "
             f"{kept[0]:9.2f}/{kept[1]:6.2f}  {fresh[0]:7.2f}/{fresh[1]:6.2f} "
             f"{kept[0] / written[0]:6.2f}x  ({found}/{count} found)"
+        )
+        # The least any finder that splits the picture into objects does: label it once (the
+        # pixels the finder reads: every k-th of a picture over max_pixels).
+        slope = height_slope(camera.width, camera.height, lens, support.normal_camera)
+        standing = depth * slope + np.float32(support.offset_camera_m) > np.float32(0.01)
+        k = max(1, math.ceil(math.sqrt(depth.size / (FinderSettings().max_pixels or depth.size))))
+        label = timed(lambda: ndimage.label(standing[::k, ::k]), repeats)  # noqa: B023
+        print(
+            f"{'':<20} one labelling of the standing pixels it reads (ndimage.label"
+            f"{f', one pixel in {k} each way' if k > 1 else ''}): {label[0]:.2f}/{label[1]:.2f} ms"
         )
         fit = timed(lambda: fit_support(depth, lens, pose), repeats)  # noqa: B023
         check = timed(lambda: support_holds(depth, lens, support), repeats)  # noqa: B023
