@@ -453,6 +453,20 @@ def _windows(
     return _Windows(counts, at, reach, bin_m)
 
 
+def _window_mean(
+    w: _Windows,
+    peak: npt.NDArray[np.intp],
+    values: npt.NDArray[np.floating],
+    group: npt.NDArray[np.int32],
+    count: int,
+) -> Float64Array:
+    """Per group, the mean of its readings in the window round its ``peak`` bin (0: none)."""
+    near = np.abs(w.at - peak[group]) <= w.reach[group, 0]
+    total = np.bincount(group[near], weights=values[near], minlength=count)
+    result: Float64Array = total / np.maximum(np.bincount(group[near], minlength=count), 1)
+    return result
+
+
 def _levels(
     values: Float32Array, which: npt.NDArray[np.int32], count: int, tol: Float64Array
 ) -> Float64Array:
@@ -460,10 +474,7 @@ def _levels(
     tolerance), then the mean of the readings within the tolerance of it, twice."""
     w = _windows(values, which, count, tol, float(values.min()))
     # The mean of the readings in the fullest window, then within the tolerance of it.
-    peak = w.counts.argmax(axis=1)
-    near = np.abs(w.at - peak[which]) <= w.reach[which, 0]
-    total = np.bincount(which[near], weights=values[near], minlength=count)
-    level = total / np.maximum(np.bincount(which[near], minlength=count), 1)
+    level = _window_mean(w, w.counts.argmax(axis=1), values, which, count)
     for _ in range(2):
         near = np.abs(values - level[which]) < tol[which]
         total = np.bincount(which[near], weights=values[near], minlength=count)
@@ -2167,9 +2178,7 @@ def _ledges(
     peak = np.where(span, window, -1.0).argmax(axis=1)
     # The mean of the readings in that window, then of those within the tolerance of it (the
     # window's middle bin may lie a tolerance and half a bin off readings all in one bin).
-    near = np.abs(w.at - peak[group]) <= half[group, 0]
-    held = np.maximum(np.bincount(group[near], minlength=count), 1)
-    centre = np.bincount(group[near], weights=values[near], minlength=count) / held
+    centre = _window_mean(w, peak, values, group, count)
     near = np.abs(values - centre[group]) < tol[group]
     sums = np.bincount(group[near], weights=values[near], minlength=count)
     number = np.bincount(group[near], minlength=count)
