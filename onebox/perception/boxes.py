@@ -249,15 +249,19 @@ def _read(
     if not plateaus:
         return []
     basis = tops.plane_basis(support, camera_to_world)
-    # Scraps of a carton's top round a box on it are levels, not boxes, if that box is found
-    # to stand at their level; if it is not, the bases are found again with them as boxes.
-    scraps = tops.scraps([p for p in plateaus if p.is_box], plateaus)
+    # Scraps of a carton's top round a box on it (strips, and a taped carton's flaps) are
+    # levels, not boxes, if that box is found to stand at their level; if it is not, the bases
+    # are found again with them as boxes.
+    candidates = [p for p in plateaus if p.is_box]
+    scraps = tops.scraps(candidates, plateaus)
+    scraps += [p for p in tops.flaps(candidates, plateaus) if p not in scraps]
     fresh = [dict(vars(p)) for p in plateaus] if scraps else []
     for scrap in scraps:
         scrap.is_box = False
     boxes = [p for p in plateaus if p.is_box]
     bases.find_bases(boxes, plateaus, height_m, labels_top, lens, support, settings)
     confirmed = {id(p) for p in tops.scraps(scraps, plateaus, standing=True)}
+    confirmed |= {id(p) for p in tops.flaps(scraps, plateaus, standing=True)}
     if len(confirmed) < len(scraps):
         for p, state in zip(plateaus, fresh, strict=True):
             vars(p).update(state)

@@ -1797,6 +1797,73 @@ def scraps(
     return found
 
 
+def flaps(
+    candidates: list[Plateau], plateaus: list[Plateau], standing: bool = False
+) -> list[Plateau]:
+    """Of ``candidates``, the flaps of a taped carton seen round a smaller box standing on it:
+    tops beside a strip of tape at their level (no more than ``PRINT_STRIP_M`` across, with
+    a top at its level along most of its length on both sides, one of them the flap) that
+    runs under a higher box (:func:`_across_end`). The carton's top, cut apart by its tape
+    and by the box on it, is a level, not boxes of their own. Before the bases are known
+    (``standing`` False) any higher box counts; after, only one standing at their level. A
+    carton packed between a narrow one of its height and another, under a box across the
+    narrow one's end, is lost."""
+    placed = [p for p in plateaus if p.rect is not None]
+    found = []
+    for flap in candidates:
+        if flap.rect is None:
+            continue
+        reach = [max(math.hypot(o.tolerance_m, flap.tolerance_m), FLAT_REACH_M) for o in placed]
+        level = [
+            o for o, r in zip(placed, reach, strict=True) if abs(o.height_m - flap.height_m) < r
+        ]
+        above = [
+            o
+            for o, r in zip(placed, reach, strict=True)
+            if o.is_box
+            and o.height_m > flap.height_m + r
+            and (not standing or abs(o.base_m - flap.height_m) < r)
+        ]
+        for tape in level:
+            rect = tape.rect
+            if tape is flap or rect is None or rect.width_m > PRINT_STRIP_M:
+                continue
+            ax = np.asarray(rect.axis)
+            perp = np.array([-ax[1], ax[0]])
+            others = [o for o in level if o is not tape]
+            if (
+                _touching(tape, [flap], perp, ax, rect.length_m)
+                and len(_touching(tape, others, perp, ax, rect.length_m)) == 2
+                and any(_across_end(tape, box) for box in above)
+            ):
+                found.append(flap)
+                break
+    return found
+
+
+def _across_end(strip: Plateau, box: Plateau) -> bool:
+    """Whether ``box`` stands across an end of ``strip``, along most of its width and at
+    least twice as wide: touching it (its rectangle may overlap the strip's by a couple of
+    centimetres), or, where the strip's end is hidden (the box's face in front of it), as far
+    off as what hides it stands."""
+    assert strip.rect is not None and box.rect is not None
+    rect = strip.rect
+    ax = np.asarray(rect.axis)
+    perp = np.array([-ax[1], ax[0]])
+    offset = np.asarray(box.rect.middle) - np.asarray(rect.middle)
+    away = float(offset @ ax)
+    gap = abs(away) - box.rect.half_extent(*ax) - rect.length_m / 2
+    end = np.sign(away) * ax
+    hidden = any(float(end @ np.asarray(n)) > 0.7 for n in rect.hidden_normals)
+    limit = max(0.015, 4.0 * strip.footprint_m) + (strip.hidden_band_m if hidden else 0.0)
+    along = float(offset @ perp)
+    half = box.rect.half_extent(*perp)
+    overlap = min(rect.width_m / 2, along + half) - max(-rect.width_m / 2, along - half)
+    # ... and at least twice as wide across it: a box on a taped carton stands on its flaps
+    # either side of the tape too.
+    return -0.02 < gap < limit and overlap > 0.5 * rect.width_m and half >= rect.width_m
+
+
 def _touching(
     strip: Plateau, others: list[Plateau], out: Float64Array, side: Float64Array, extent: float
 ) -> set[int]:
