@@ -172,14 +172,26 @@ def test_random_pallet_taped_scraps_round_a_box_on_a_carton_are_no_boxes(seed, n
 
 
 @pytest.mark.parametrize(
-    ("seed", "noise"), [(5, "none"), (16, "none"), (24, "none"), (5, "d435"), (16, "d435")]
+    ("seed", "noise"),
+    [
+        (1, "none"),
+        (5, "none"),
+        (16, "none"),
+        (18, "none"),
+        (24, "none"),
+        (5, "d435"),
+        (16, "d435"),
+        (8, "azure_kinect"),
+    ],
 )
 def test_random_pallet_taped_flaps_round_a_box_on_a_carton_are_no_boxes(seed, noise):
     """A smaller carton standing across a taped one's tape: what shows of the lower top round
     it are its flaps, 10-60 cm long, cut apart by the tape and the box. Finders before
     reported each flap as a box beside the upper carton, and measured that one from the pallet
     (seed 16: 0.341 m tall for 0.180): 8 of the 9 false boxes on the taped pallets of seeds
-    1-30."""
+    1-30. Seeds 1 and 18 show only stubs of the tape past the box's ends; on seed 8 through
+    the Kinect's noise a stub's other side is a whole carton packed against the flap, which
+    stays a box."""
     judged = _judged(random_pallet(seed, taped=True), noise)
     assert judged.missed == 0 and judged.false == 0, judged.notes
     assert judged.found >= 2

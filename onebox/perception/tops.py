@@ -1803,8 +1803,8 @@ def flaps(
     """Of ``candidates``, the flaps of a taped carton seen round a smaller box standing on it:
     tops beside a strip of tape at their level (no more than ``PRINT_STRIP_M`` across, with
     a top at its level along most of its length on both sides, one of them the flap) that
-    runs under a higher box (:func:`_across_end`). The carton's top, cut apart by its tape
-    and by the box on it, is a level, not boxes of their own. Before the bases are known
+    runs under a higher box (:func:`_is_tape`). The carton's top, cut apart by its tape and
+    by the box on it, is a level, not boxes of their own. Before the bases are known
     (``standing`` False) any higher box counts; after, only one standing at their level. A
     carton packed between a narrow one of its height and another, under a box across the
     narrow one's end, is lost."""
@@ -1824,44 +1824,78 @@ def flaps(
             and o.height_m > flap.height_m + r
             and (not standing or abs(o.base_m - flap.height_m) < r)
         ]
-        for tape in level:
-            rect = tape.rect
-            if tape is flap or rect is None or rect.width_m > PRINT_STRIP_M:
-                continue
-            ax = np.asarray(rect.axis)
-            perp = np.array([-ax[1], ax[0]])
-            others = [o for o in level if o is not tape]
-            if (
-                _touching(tape, [flap], perp, ax, rect.length_m)
-                and len(_touching(tape, others, perp, ax, rect.length_m)) == 2
-                and any(_across_end(tape, box) for box in above)
-            ):
-                found.append(flap)
-                break
+        if any(_is_tape(tape, flap, level, above) for tape in level if tape is not flap):
+            found.append(flap)
     return found
 
 
-def _across_end(strip: Plateau, box: Plateau) -> bool:
-    """Whether ``box`` stands across an end of ``strip``, along most of its width and at
-    least twice as wide: touching it (its rectangle may overlap the strip's by a couple of
-    centimetres), or, where the strip's end is hidden (the box's face in front of it), as far
-    off as what hides it stands."""
-    assert strip.rect is not None and box.rect is not None
-    rect = strip.rect
+def _is_tape(tape: Plateau, flap: Plateau, level: list[Plateau], above: list[Plateau]) -> bool:
+    """Whether ``tape`` is a strip of tape beside ``flap``: no more than ``PRINT_STRIP_M``
+    across, with tops of ``level`` along most of its length on both sides, ``flap`` one of
+    them, and a box of ``above`` across its end (:func:`_across_end`). A strip no longer than
+    that either (a stub of tape past a box's end) may run either way."""
+    rect = tape.rect
+    if rect is None or rect.width_m > PRINT_STRIP_M:
+        return False
     ax = np.asarray(rect.axis)
     perp = np.array([-ax[1], ax[0]])
-    offset = np.asarray(box.rect.middle) - np.asarray(rect.middle)
-    away = float(offset @ ax)
-    gap = abs(away) - box.rect.half_extent(*ax) - rect.length_m / 2
-    end = np.sign(away) * ax
-    hidden = any(float(end @ np.asarray(n)) > 0.7 for n in rect.hidden_normals)
+    others = [o for o in level if o is not tape]
+    assert flap.rect is not None
+    for out, side, span, extent in (
+        (perp, ax, rect.width_m, rect.length_m),
+        (ax, perp, rect.length_m, rect.width_m),
+    ):
+        if (
+            span <= PRINT_STRIP_M
+            and _touching(tape, [flap], out, side, extent)
+            and any(_across_end(tape, box, side, extent, span) for box in above)
+            and len(_touching(tape, others, out, side, extent)) == 2
+            # A stub run across its rectangle's length: the tops either side are one
+            # carton's flaps, of one width across it (not the next carton packed against one).
+            and (side is ax or _one_width(tape, others, out, side, extent))
+        ):
+            return True
+    return False
+
+
+def _one_width(
+    strip: Plateau, others: list[Plateau], out: Float64Array, side: Float64Array, extent: float
+) -> bool:
+    """Whether the tops of ``others`` touching ``strip``'s two sides along ``side`` are as
+    wide across it, within a quarter."""
+    widths: dict[int, list[float]] = {}
+    for other in others:
+        ends = _touching(strip, [other], out, side, extent)
+        if len(ends) == 1:
+            assert other.rect is not None
+            widths.setdefault(ends.pop(), []).append(2.0 * other.rect.half_extent(*out))
+    if len(widths) < 2:
+        return False
+    near, far = max(widths[1]), max(widths[-1])
+    return bool(min(near, far) >= 0.75 * max(near, far))
+
+
+def _across_end(
+    strip: Plateau, box: Plateau, along: Float64Array, length_m: float, width_m: float
+) -> bool:
+    """Whether ``box`` stands across an end of ``strip`` (``length_m`` along ``along``,
+    ``width_m`` across), along most of its width and at least twice as wide: touching it (its
+    rectangle may overlap the strip's by a couple of centimetres), or, where the strip's end
+    is hidden (the box's face in front of it), as far off as what hides it stands."""
+    assert strip.rect is not None and box.rect is not None
+    across = np.array([-along[1], along[0]])
+    offset = np.asarray(box.rect.middle) - np.asarray(strip.rect.middle)
+    away = float(offset @ along)
+    gap = abs(away) - box.rect.half_extent(*along) - length_m / 2
+    end = np.sign(away) * along
+    hidden = any(float(end @ np.asarray(n)) > 0.7 for n in strip.rect.hidden_normals)
     limit = max(0.015, 4.0 * strip.footprint_m) + (strip.hidden_band_m if hidden else 0.0)
-    along = float(offset @ perp)
-    half = box.rect.half_extent(*perp)
-    overlap = min(rect.width_m / 2, along + half) - max(-rect.width_m / 2, along - half)
+    middle = float(offset @ across)
+    half = box.rect.half_extent(*across)
+    overlap = min(width_m / 2, middle + half) - max(-width_m / 2, middle - half)
     # ... and at least twice as wide across it: a box on a taped carton stands on its flaps
     # either side of the tape too.
-    return -0.02 < gap < limit and overlap > 0.5 * rect.width_m and half >= rect.width_m
+    return -0.02 < gap < limit and overlap > 0.5 * width_m and half >= width_m
 
 
 def _touching(
