@@ -1840,7 +1840,6 @@ def _is_tape(tape: Plateau, flap: Plateau, level: list[Plateau], above: list[Pla
     ax = np.asarray(rect.axis)
     perp = np.array([-ax[1], ax[0]])
     others = [o for o in level if o is not tape]
-    assert flap.rect is not None
     for out, side, span, extent in (
         (perp, ax, rect.width_m, rect.length_m),
         (ax, perp, rect.length_m, rect.width_m),
