@@ -38,7 +38,7 @@ from scipy import ndimage
 
 from onebox.geometry import to_world
 from onebox.perception import seed as seed_method
-from onebox.perception.boxes import BoxFinder, FinderSettings, find_boxes
+from onebox.perception.boxes import BoxFinder, FinderSettings, find_boxes, read_stride
 from onebox.perception.register import colour_offset
 from onebox.perception.support import fit_support, support_holds
 from onebox.perception.tops import height_slope
@@ -125,7 +125,7 @@ def speed(repeats: int) -> None:
         # pixels the finder reads: every k-th of a picture over max_pixels).
         slope = height_slope(camera.width, camera.height, lens, support.normal_camera)
         standing = depth * slope + np.float32(support.offset_camera_m) > np.float32(0.01)
-        k = max(1, math.ceil(math.sqrt(depth.size / (FinderSettings().max_pixels or depth.size))))
+        k = read_stride(depth.shape, FinderSettings().max_pixels)
         label = timed(lambda: ndimage.label(standing[::k, ::k]), repeats)  # noqa: B023
         print(
             f"{'':<20} one labelling of the standing pixels it reads (ndimage.label"

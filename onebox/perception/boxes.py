@@ -187,7 +187,7 @@ def find_boxes(
     frame = "world" if camera_to_world is not None else "camera"
     if colour is not None:
         colour = register.in_register(colour, colour_shift)
-    stride = _stride(depth.shape, settings.max_pixels)
+    stride = read_stride(depth.shape, settings.max_pixels)
     if stride > 1:
         # Pixel k * u' is pixel u' of the coarse picture: its ray is unchanged, so the lens
         # scales exactly (middle of pixel u at u: cx / k, not (cx + 0.5) / k - 0.5).
@@ -381,7 +381,7 @@ def _signed_area(poly: Float64Array) -> float:
     return 0.5 * float(x @ np.roll(y, -1) - y @ np.roll(x, -1))
 
 
-def _stride(shape: tuple[int, ...], max_pixels: int | None) -> int:
+def read_stride(shape: tuple[int, ...], max_pixels: int | None) -> int:
     """Every how many pixels a picture is read (1: all)."""
     if max_pixels is None or shape[0] * shape[1] <= max_pixels:
         return 1
