@@ -102,13 +102,30 @@ def _sample(depth_m: Float32Array, lens: Intrinsics) -> tuple[Float64Array, IntA
     return points, rows * width + cols
 
 
-def _initial_threshold(d: Float64Array, sigma_m: float | None) -> Float64Array:
+def _initial_threshold(
+    d: Float64Array, sigma_m: float | None, quantum_m2: float = 0.0
+) -> Float64Array:
     if sigma_m is not None:
         return np.full(d.shape, max(3.0 * sigma_m, 0.001))
     # Unknown noise: generous enough for a stereo camera at 2 m, tight enough at 0.4 m that a
-    # 1 cm box is not on the plane.
-    result: Float64Array = 0.0015 + 0.004 * d * d
+    # 1 cm box is not on the plane; never less than one and a half depth steps.
+    result: Float64Array = np.maximum(0.0015 + 0.004 * d * d, 1.5 * quantum_m2 * d * d)
     return result
+
+
+def depth_quantum(depth_m: Float32Array) -> float:
+    """The step in which the camera reports depth, over distance squared (1/m): a stereo or
+    structured-light camera reports whole (or eighth) disparities, so its depth comes in steps
+    that grow as z^2. Measured as a low percentile of the non-zero differences between
+    horizontal neighbours on a grid of rows (0 for a renderer's continuous depth)."""
+    rows = depth_m[:: max(1, depth_m.shape[0] // 48)].astype(np.float64)
+    diff = np.abs(np.diff(rows, axis=1))
+    z = rows[:, 1:]
+    with np.errstate(invalid="ignore"):
+        ok = (diff > 0) & (diff < 0.02 * z)
+    if ok.sum() < 100:
+        return 0.0
+    return float(np.percentile(diff[ok] / (z[ok] * z[ok]), 20))
 
 
 def _ransac(
@@ -158,8 +175,10 @@ def _refine(
     points: Float64Array,
     inliers: npt.NDArray[np.bool_],
     sigma_m: float | None,
+    quantum_m2: float = 0.0,
 ) -> tuple[Float64Array, float, float, float, npt.NDArray[np.bool_]]:
-    """Least squares, noise from the residuals, inliers again at 3 sigma(z), least squares."""
+    """Least squares, noise from the residuals (never under half a depth step), inliers again
+    at 3 sigma(z), least squares."""
     normal, offset, _ = _least_squares(points[inliers])
     d = points[:, 2]
     distance = float(np.median(d[inliers]))
@@ -168,7 +187,7 @@ def _refine(
         if sigma_m is None:
             scaled = residual[inliers] / (d[inliers] / distance) ** 2
             sigma = 1.4826 * float(np.median(np.abs(scaled - np.median(scaled))))
-            sigma = max(sigma, SIGMA_FLOOR_M)
+            sigma = max(sigma, SIGMA_FLOOR_M, 0.5 * quantum_m2 * distance * distance)
         else:
             sigma = sigma_m
         threshold = np.maximum(3.0 * sigma * (d / distance) ** 2, 3.0 * SIGMA_FLOOR_M)
@@ -253,6 +272,7 @@ def fit_support(
     if len(points) < 30:
         return None
     rng = np.random.default_rng(seed)
+    quantum = depth_quantum(depth_m) if noise_sigma_m is None else 0.0
     min_cos = math.cos(math.radians(max_tilt_deg))
     up: Float64Array | None = None
     if camera_to_world is not None:
@@ -264,21 +284,22 @@ def fit_support(
         if len(left) < MIN_SHARE * len(points):
             break
         sub = points[left]
-        found = _ransac(sub, _initial_threshold(sub[:, 2], noise_sigma_m), up, min_cos, rng)
+        band = _initial_threshold(sub[:, 2], noise_sigma_m, quantum)
+        found = _ransac(sub, band, up, min_cos, rng)
         if found is None:
             break
         normal, offset = found
-        first = np.abs(sub @ normal + offset) < _initial_threshold(sub[:, 2], noise_sigma_m)
+        first = np.abs(sub @ normal + offset) < band
         if first.sum() < MIN_SHARE * len(points):
             break
-        normal, offset, sigma, distance, inliers = _refine(sub, first, noise_sigma_m)
+        normal, offset, sigma, distance, inliers = _refine(sub, first, noise_sigma_m, quantum)
         share = float(inliers.sum()) / len(points)
         if up is None:
             up = normal  # without a pose the first (largest) plane says which way is up
         if share >= MIN_SHARE and float(normal @ up) >= min_cos:
             candidates.append((normal, offset, share, sigma, distance))
         # Take out a wider band than the inliers, so the next round finds another plane.
-        wide = np.abs(sub @ normal + offset) < 2.0 * _initial_threshold(sub[:, 2], noise_sigma_m)
+        wide = np.abs(sub @ normal + offset) < 2.0 * band
         remaining[left[wide | inliers]] = False
     if not candidates:
         return None

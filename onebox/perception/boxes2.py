@@ -1,0 +1,382 @@
+"""Every box in a depth picture: oriented, measured, topmost first, with stable ids in a stream.
+
+Contract: :func:`find_boxes` takes a depth picture (H x W float32 metres; NaN, 0, negative and
+inf are no reading), the lens (CameraInfo convention: the middle of pixel u is at u), the
+camera's pose (optical frame -> world, 4 x 4) or None, optionally the colour picture of the
+same size (H x W x 3 uint8, RGB) and how many whole pixels it lies off the depth, and
+:class:`FinderSettings`. It returns :class:`Found`: the support plane and the boxes, highest
+top first, in the world frame with a pose and in the optical frame without one ("up" is then
+the support normal, toward the camera). :class:`BoxFinder` does the same for a stream (see
+:mod:`onebox.perception.stream`). No I/O here.
+
+The pipeline, one module a physical effect:
+
+1. :mod:`~onebox.perception.support`: the surface the boxes stand on (RANSAC, then least
+   squares) and the depth noise measured on it, growing with distance (sigma(z)).
+2. :mod:`~onebox.perception.surface`: every pixel's height above it, which way it faces, where
+   the depth steps.
+3. :mod:`~onebox.perception.tops`: connected flat regions facing up, split where a seam seen
+   only in colour crosses them (:mod:`~onebox.perception.seams`), each measured as an oriented
+   rectangle on its own plane.
+4. Here: what lies round each top (:func:`_look_round`): something nearer hiding a side (the
+   extent along that side is then a lower bound), a lower level, or nothing seen; what each
+   top stands on (the highest lower top under its middle, else the support); which tops are
+   boxes (flat, level, filling their rectangle: round, curved and ragged things do not); and
+   the report.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from onebox.geometry import Intrinsics
+from onebox.perception import register
+from onebox.perception.surface import read_surface
+from onebox.perception.support import Support, fit_support
+from onebox.perception.tops2 import Tops, find_tops
+
+Float32Array = npt.NDArray[np.float32]
+Float64Array = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
+Vec3 = tuple[float, float, float]
+
+MAX_PIXELS = 848 * 480
+"""Larger pictures are read at every k-th pixel (a D435's depth and an Azure Kinect's 640 x 576
+are read whole; 1280 x 720 as 640 x 360)."""
+PROBES_PER_SIDE = 9
+"""Points looked at just past each side of a top."""
+PROBE_REACH_M = 0.012
+"""...this far past it (and at least two pixels): past a smeared edge, within a gap."""
+HIDDEN_SHARE = 0.3
+"""A side is hidden when this share of its probes see something nearer than the top."""
+HIDDEN_FILL = 0.6
+"""A top with a hidden side must fill this much of the rectangle seen (a whole one: min_score)."""
+MIN_WIDTH_M = 0.015
+"""A top narrower than this is an edge or a rim, not a box."""
+FLAT_SIGMAS = 3.0
+"""A top lies within this many sigma(z) of its plane (root mean square)..."""
+FLAT_M = 0.004
+"""...or within this, whatever the noise (a carton's lid bulges)."""
+
+
+@dataclass(frozen=True)
+class FinderSettings:
+    """Tolerances; the depth noise's are measured on the support plane."""
+
+    min_height_m: float = 0.01
+    """Less than this above the surface is the surface."""
+    noise_sigma_m: float | None = None
+    """Depth noise; None estimates it from the support plane's residuals (growing as z^2)."""
+    table_z_m: float | None = None
+    """Skip the fit: the surface is the world plane z = table_z (needs a pose)."""
+    max_tilt_deg: float = 15.0
+    """A support plane may be this far from world up (with a pose)."""
+    workspace: tuple[tuple[float, float], tuple[float, float], tuple[float, float]] | None = None
+    """World (or optical-frame) x, y, z limits of a box's top middle; nothing reported outside."""
+    max_height_m: float | None = None
+    """A ceiling above the surface; anything higher is ignored."""
+    min_top_area_m2: float = 0.0004
+    """Tops smaller than this (2 x 2 cm) are no boxes: speckles, clumps, flying pixels."""
+    min_score: float = 0.85
+    """A top seen whole must fill this share of its rectangle (a disc fills 0.785)."""
+    max_top_tilt_deg: float = 15.0
+    """A box's top is parallel to the surface under it within this angle (lids bulge, lean)."""
+    keep_cut_off: bool = False
+    """Report tops cut off by the picture's border (their size is then a lower bound)."""
+    match_distance_m: float = 0.02
+    """BoxFinder: a box within this of last picture's box (and of a similar size) keeps its id."""
+    max_pixels: int | None = MAX_PIXELS
+    """Larger pictures are read at every k-th pixel to keep camera rate; None reads them all."""
+    colour_shift: tuple[int, int] | None = None
+    """BoxFinder: the colour picture's shift against the depth, (dy, dx) whole pixels (see
+    :mod:`onebox.perception.register`); None measures it from the pictures."""
+    register_every: int = 30
+    """BoxFinder: measure the colour's shift on the first picture and every this many after."""
+
+
+@dataclass(frozen=True)
+class Box:
+    """One box, in the frame of :class:`Found`."""
+
+    centre: Vec3
+    """The middle of the whole box: the top's middle less half the height along the normal."""
+    quaternion_xyzw: tuple[float, float, float, float]
+    """The box's axes: x along its length, z along the support normal (up)."""
+    size: Vec3
+    """Length, width (length >= width) and height, metres."""
+    yaw_deg: float
+    """The length axis's angle about world z (about the support normal without a pose), from
+    the frame's x axis (the support plane's projection of it), in (-90, 90]."""
+    score: float
+    """0..1: how full the top's rectangle is, times how flat the top is."""
+    top_pixels: int
+    top_middle: Vec3
+    on: int | None = None
+    """The index (in Found.boxes) of the box it stands on, if any."""
+    id: int = -1
+    """Stable across a stream (BoxFinder); -1 from find_boxes."""
+    hidden_sides: int = 0
+    """Sides of the top another object hides: the size along them is a lower bound."""
+    height_seen: bool = True
+    """Whether the level it stands on is seen beside it; when not (a carton in a full layer),
+    the height is measured to the level its neighbours stand on and is only as good as that."""
+    name: str = ""
+    """The catalogue entry its top matches, if a catalogue is used."""
+
+
+@dataclass(frozen=True)
+class Found:
+    """The support plane and the boxes, highest top first, all in ``frame``."""
+
+    support: Support | None
+    boxes: list[Box] = field(default_factory=list)
+    frame: str = "camera"
+
+
+def read_stride(shape: tuple[int, ...], max_pixels: int | None) -> int:
+    """Every how many pixels a picture is read (1: all)."""
+    if max_pixels is None or shape[0] * shape[1] <= max_pixels:
+        return 1
+    return math.ceil(math.sqrt(shape[0] * shape[1] / max_pixels))
+
+
+def clean_depth(depth_m: npt.NDArray[np.floating]) -> Float32Array:
+    """Float32 metres with every kind of no reading (0, negative, inf) as NaN."""
+    depth = np.array(depth_m, dtype=np.float32, copy=True)
+    with np.errstate(invalid="ignore"):
+        depth[~(depth > 0) | ~np.isfinite(depth)] = np.nan
+    return depth
+
+
+def find_boxes(
+    depth_m: npt.NDArray[np.floating],
+    lens: Intrinsics,
+    camera_to_world: Float64Array | None,
+    colour: npt.NDArray[np.uint8] | None = None,
+    settings: FinderSettings = FinderSettings(),
+    support: Support | None = None,
+    colour_shift: tuple[int, int] = (0, 0),
+) -> Found:
+    """Every box in the picture (see the module docstring); ``support`` skips the plane fit;
+    ``colour_shift`` is how far the colour lies off the depth (:mod:`register`)."""
+    depth = clean_depth(depth_m)
+    frame = "world" if camera_to_world is not None else "camera"
+    if colour is not None:
+        colour = register.in_register(colour, colour_shift)
+    stride = read_stride(depth.shape, settings.max_pixels)
+    if stride > 1:
+        # Pixel k * u' is pixel u' of the coarse picture: its ray is unchanged, so the lens
+        # scales exactly (middle of pixel u at u: cx / k, not (cx + 0.5) / k - 0.5).
+        depth = np.ascontiguousarray(depth[::stride, ::stride])
+        colour = None if colour is None else np.ascontiguousarray(colour[::stride, ::stride])
+        lens = Intrinsics(lens.fx / stride, lens.fy / stride, lens.cx / stride, lens.cy / stride)
+    if support is None:
+        support = fit_support(
+            depth,
+            lens,
+            camera_to_world,
+            max_tilt_deg=settings.max_tilt_deg,
+            noise_sigma_m=settings.noise_sigma_m,
+            table_z_m=settings.table_z_m,
+        )
+    if support is None:
+        return Found(None, [], frame)
+    surface = read_surface(depth, lens, support)
+    tops = find_tops(depth, surface, lens, support, colour, settings.min_height_m,
+                     settings.max_height_m)
+    if len(tops) == 0:
+        return Found(support, [], frame)
+    round_ = _look_round(tops, depth, lens, support)
+    is_box = _boxes(tops, round_, settings)
+    base, on = _bases(tops, is_box)
+    return Found(support, _report(tops, round_, is_box, base, on, support, camera_to_world,
+                                  settings), frame)
+
+
+@dataclass(frozen=True)
+class Round:
+    """What is seen just past each side of each top (n, 4 sides)."""
+
+    hidden: BoolArray
+    """Something nearer than the top hides the side."""
+    lower_m: Float64Array
+    """(n, 4, PROBES_PER_SIDE): the height seen past the side where it is lower than the top
+    (NaN where not)."""
+    cut_off: BoolArray
+    """Past the side lies outside the picture."""
+
+
+def _look_round(tops: Tops, depth_m: Float32Array, lens: Intrinsics, support: Support) -> Round:
+    """Probe points just past each side of every top, on the top's plane extended: what the
+    camera sees along the ray to each (see :class:`Round`)."""
+    n = len(tops)
+    rows, cols = depth_m.shape
+    e1, e2, normal = tops.basis
+    axis = tops.axis_ab
+    perp = np.stack([-axis[:, 1], axis[:, 0]], axis=1)
+    half = np.stack([tops.length_m, tops.width_m], axis=1) * 0.5
+    pixel = tops.depth_m / lens.fx
+    reach = np.maximum(PROBE_REACH_M, 2.5 * pixel)
+    # Sides: +length, -length, +width, -width; probes spread along each side's middle 80 %.
+    spread = np.linspace(-0.8, 0.8, PROBES_PER_SIDE)
+    outward = np.stack([axis, -axis, perp, -perp], axis=1)  # (n, 4, 2)
+    along = np.stack([perp, perp, axis, axis], axis=1)
+    out_len = np.stack([half[:, 0], half[:, 0], half[:, 1], half[:, 1]], axis=1) + reach[:, None]
+    along_len = np.stack([half[:, 1], half[:, 1], half[:, 0], half[:, 0]], axis=1)
+    ab = (
+        tops.middle_ab[:, None, None, :]
+        + outward[:, :, None, :] * out_len[:, :, None, None]
+        + along[:, :, None, :] * (along_len[:, :, None, None] * spread[None, None, :, None])
+    )  # (n, 4, P, 2)
+    lift = (tops.height_m - support.offset_camera_m)[:, None, None, None]
+    point = ab[..., :1] * e1 + ab[..., 1:] * e2 + lift * normal  # (n, 4, P, 3)
+    z_expected = point[..., 2]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = np.rint(lens.fx * point[..., 0] / z_expected + lens.cx)
+        v = np.rint(lens.fy * point[..., 1] / z_expected + lens.cy)
+    inside = (u >= 0) & (u < cols) & (v >= 0) & (v < rows) & (z_expected > 0)
+    ui = np.where(inside, u, 0).astype(np.intp)
+    vi = np.where(inside, v, 0).astype(np.intp)
+    seen = np.where(inside, depth_m[vi, ui], np.nan).astype(np.float64)
+    tolerance = np.maximum(3.0 * tops.sigma_m, 0.006)[:, None, None]
+    with np.errstate(invalid="ignore"):
+        nearer = seen < z_expected - tolerance * 4.0
+        seen_height = seen / z_expected * (tops.height_m[:, None, None] - support.offset_camera_m)
+        seen_height += support.offset_camera_m  # height along the same ray, by similar triangles
+        lower = np.where(seen > z_expected + tolerance, seen_height, np.nan)
+    hidden = nearer.mean(axis=2) >= HIDDEN_SHARE
+    cut_off = (~inside).mean(axis=2) >= HIDDEN_SHARE
+    return Round(hidden, lower, cut_off)
+
+
+def _boxes(tops: Tops, round_: Round, settings: FinderSettings) -> BoolArray:
+    """Which tops are boxes' (see the module docstring)."""
+    hidden = round_.hidden.any(axis=1)
+    fill_needed = np.where(hidden, HIDDEN_FILL, settings.min_score)
+    flat = tops.rms_m <= np.maximum(FLAT_SIGMAS * tops.sigma_m, FLAT_M)
+    result: BoolArray = (
+        (tops.area_m2 >= settings.min_top_area_m2)
+        & (tops.width_m >= MIN_WIDTH_M)
+        & (tops.tilt_deg <= settings.max_top_tilt_deg)
+        & flat
+        & (tops.fill >= fill_needed)
+    )
+    if not settings.keep_cut_off:
+        result &= ~tops.on_border & ~round_.cut_off.any(axis=1)
+    return result
+
+
+def _bases(tops: Tops, is_box: BoolArray) -> tuple[Float64Array, npt.NDArray[np.intp]]:
+    """The level each top stands on: the highest lower top whose rectangle holds its middle
+    (a box on a box, a carton on a pallet), else the support (0). Also which top that is (-1:
+    the support)."""
+    n = len(tops)
+    d = tops.middle_ab[:, None, :] - tops.middle_ab[None, :, :]  # (k top, j lower)
+    along = np.abs(d[..., 0] * tops.axis_ab[None, :, 0] + d[..., 1] * tops.axis_ab[None, :, 1])
+    across = np.abs(d[..., 1] * tops.axis_ab[None, :, 0] - d[..., 0] * tops.axis_ab[None, :, 1])
+    under = (
+        (along <= 0.5 * tops.length_m[None, :])
+        & (across <= 0.5 * tops.width_m[None, :])
+        & (tops.height_m[None, :] < tops.height_m[:, None] - 0.01)
+    )
+    under[np.arange(n), np.arange(n)] = False
+    levels = np.where(under, tops.height_m[None, :], -np.inf)
+    on = np.argmax(levels, axis=1)
+    has = np.isfinite(levels[np.arange(n), on])
+    base = np.where(has, tops.height_m[on], 0.0)
+    return base, np.where(has, on, -1)
+
+
+def _report(
+    tops: Tops,
+    round_: Round,
+    is_box: BoolArray,
+    base_m: Float64Array,
+    on: npt.NDArray[np.intp],
+    support: Support,
+    camera_to_world: Float64Array | None,
+    settings: FinderSettings,
+) -> list[Box]:
+    e1, e2, n_c = tops.basis
+    rotation = camera_to_world[:3, :3] if camera_to_world is not None else np.eye(3)
+    shift = camera_to_world[:3, 3] if camera_to_world is not None else np.zeros(3)
+    order = [int(k) for k in np.argsort(-tops.height_m) if is_box[k]]
+    index = {k: i for i, k in enumerate(order)}
+    flatness = np.clip(1.0 - tops.rms_m / np.maximum(FLAT_SIGMAS * tops.sigma_m, FLAT_M), 0, 1)
+    result: list[Box] = []
+    for k in order:
+        middle = tops.middle_ab[k]
+        top_c = middle[0] * e1 + middle[1] * e2 + (tops.height_m[k] - support.offset_camera_m) * n_c
+        height = float(tops.height_m[k] - base_m[k])
+        centre_c = top_c - 0.5 * height * n_c
+        length_c = tops.axis_ab[k, 0] * e1 + tops.axis_ab[k, 1] * e2
+        x_axis = rotation @ length_c
+        z_axis = rotation @ n_c
+        y_axis = np.cross(z_axis, x_axis)
+        top = rotation @ top_c + shift
+        centre = rotation @ centre_c + shift
+        if settings.workspace is not None and not all(
+            lo <= value <= hi for value, (lo, hi) in zip(top, settings.workspace, strict=True)
+        ):
+            continue
+        if camera_to_world is not None:
+            yaw = math.degrees(math.atan2(float(x_axis[1]), float(x_axis[0])))
+        else:
+            yaw = math.degrees(math.atan2(float(tops.axis_ab[k, 1]), float(tops.axis_ab[k, 0])))
+        yaw = (yaw + 90.0) % 180.0 - 90.0
+        if yaw == -90.0:
+            yaw = 90.0
+        q = quaternion(np.stack([x_axis, y_axis, z_axis], axis=1))
+        seen_base = np.abs(round_.lower_m[k] - base_m[k]) < np.maximum(
+            4.0 * tops.sigma_m[k], 0.01
+        )
+        result.append(
+            Box(
+                centre=_vec(centre),
+                quaternion_xyzw=(float(q[0]), float(q[1]), float(q[2]), float(q[3])),
+                size=(float(tops.length_m[k]), float(tops.width_m[k]), height),
+                yaw_deg=yaw,
+                score=float(min(tops.fill[k], 1.0) * flatness[k]),
+                top_pixels=int(tops.pixels[k]),
+                top_middle=_vec(top),
+                on=index.get(int(on[k])) if on[k] >= 0 else None,
+                hidden_sides=int(round_.hidden[k].sum()),
+                height_seen=bool(seen_base.any()),
+            )
+        )
+    if len(result) != len(order):
+        result = [Box(**{**b.__dict__, "on": None}) for b in result]
+    return result
+
+
+def quaternion(m: Float64Array) -> Float64Array:
+    """x, y, z, w of a rotation matrix (Shepperd's method: the largest of the four first)."""
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    i = int(np.argmax([m[0, 0], m[1, 1], m[2, 2], trace]))
+    if i == 3:
+        w = math.sqrt(1.0 + trace) / 2
+        q = [
+            (m[2, 1] - m[1, 2]) / (4 * w),
+            (m[0, 2] - m[2, 0]) / (4 * w),
+            (m[1, 0] - m[0, 1]) / (4 * w),
+            w,
+        ]
+    else:
+        j, k = (i + 1) % 3, (i + 2) % 3
+        big = math.sqrt(1.0 + m[i, i] - m[j, j] - m[k, k]) / 2
+        q = [0.0, 0.0, 0.0, (m[k, j] - m[j, k]) / (4 * big)]
+        q[i] = big
+        q[j] = (m[j, i] + m[i, j]) / (4 * big)
+        q[k] = (m[k, i] + m[i, k]) / (4 * big)
+    result: Float64Array = np.asarray(q, dtype=np.float64)
+    if result[3] < 0:
+        result = -result
+    return result / float(np.linalg.norm(result))
+
+
+def _vec(v: Float64Array) -> Vec3:
+    return (float(v[0]), float(v[1]), float(v[2]))

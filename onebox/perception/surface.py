@@ -1,0 +1,148 @@
+"""What the camera sees of the surfaces over the support: heights, which way they face, where
+the depth steps.
+
+Contract: :func:`read_surface` takes a depth picture (float32 metres, NaN = no reading), the
+lens and the :class:`~onebox.perception.support.Support`, and returns a :class:`Surface`: every
+pixel's height above the support, whether it faces up (a top, not a side face), its noise
+sigma(z) and the pixels where the height steps between neighbours by more than the noise
+allows. Whole-array work (OpenCV filters); no loop over pixels.
+
+The physical effects, one line each:
+
+- **Height.** A pixel's point is ``z * ray``; its height is ``normal . point + offset``, so the
+  height of every pixel is one multiply-add, ``z * slope + offset`` with ``slope`` the rays'
+  dot product with the normal (cached per lens and plane).
+- **Noise grows with distance.** sigma(z) = sigma_support * (z / z_support)^2 (stereo and
+  structured light alike), floored; every tolerance below is a multiple of it.
+- **Which way a surface faces.** The normal of the surface through a pixel follows from the
+  depth's gradient alone: for ``P = z * ray``, ``n ~ (-fx z_u, -fy z_v, z + (u - cx) z_u +
+  (v - cy) z_v)``. The gradient is taken across a few pixels of box-filtered depth (wider where
+  the noise is larger), so a top's noise does not turn it into a side. A top faces up within
+  ``MAX_TOP_TILT_DEG``; a side face, a can's flank or a smeared edge does not.
+- **Depth steps.** Where the height spread of a pixel's 3 x 3 neighbourhood passes
+  ``STEP_SIGMAS`` sigma(z) (and ``MIN_STEP_M``), two surfaces meet: the pixel is a boundary.
+- **No reading.** NaN is nowhere: it faces no way and belongs to no top.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from onebox.geometry import Intrinsics
+from onebox.perception.support import Support
+
+Float32Array = npt.NDArray[np.float32]
+BoolArray = npt.NDArray[np.bool_]
+
+MAX_TOP_TILT_DEG = 30.0
+"""A pixel whose surface turns further than this from the support's normal is no top's (a lid
+that bulges or leans tilts up to ~12 degrees; the per-pixel normal adds its noise)."""
+STEP_SIGMAS = 5.0
+"""A height spread across 3 x 3 pixels beyond this many sigma(z) is a step between surfaces."""
+MIN_STEP_M = 0.004
+"""...and beyond this, whatever the noise: print and renderer precision make no step."""
+NORMAL_REACH_PX = 2
+"""The depth's gradient is taken this many pixels either side (more when noisy, see below)."""
+
+
+@dataclass(frozen=True)
+class Surface:
+    """Per-pixel readings of one depth picture against its support (all H x W)."""
+
+    height_m: Float32Array
+    """Height above the support; NaN where there is no reading."""
+    sigma_m: Float32Array
+    """The depth noise expected at each pixel's distance."""
+    up: BoolArray
+    """The surface through the pixel faces up (within MAX_TOP_TILT_DEG of the normal)."""
+    step: BoolArray
+    """The height steps across the pixel's 3 x 3 neighbourhood: two surfaces meet here."""
+    slope: Float32Array
+    """Height per metre of depth along each pixel's ray (height = depth * slope + offset)."""
+    reach_px: int
+    """How many pixels either side the normals were taken across (edges blur this far)."""
+
+
+@functools.lru_cache(maxsize=8)
+def _rays(lens: Intrinsics, width: int, height: int) -> tuple[Float32Array, Float32Array]:
+    """Every pixel's ray x/z and y/z (middle of pixel u at u)."""
+    across = ((np.arange(width, dtype=np.float32) - lens.cx) / lens.fx).astype(np.float32)
+    down = ((np.arange(height, dtype=np.float32) - lens.cy) / lens.fy).astype(np.float32)
+    return across, down
+
+
+@functools.lru_cache(maxsize=8)
+def height_slope(
+    lens: Intrinsics, width: int, height: int, normal: tuple[float, float, float]
+) -> Float32Array:
+    """``normal . ray`` for every pixel: height = depth * slope + offset."""
+    across, down = _rays(lens, width, height)
+    slope = (
+        np.float32(normal[0]) * across[None, :]
+        + np.float32(normal[1]) * down[:, None]
+        + np.float32(normal[2])
+    )
+    result: Float32Array = np.ascontiguousarray(slope, dtype=np.float32)
+    return result
+
+
+def read_surface(depth_m: Float32Array, lens: Intrinsics, support: Support) -> Surface:
+    """Heights, noise, facing and steps for every pixel (see the module docstring)."""
+    rows, cols = depth_m.shape
+    slope = height_slope(lens, cols, rows, support.normal_camera)
+    height = depth_m * slope + np.float32(support.offset_camera_m)
+    sigma = support.sigma_at(depth_m)
+    valid = np.isfinite(depth_m)
+    reach = normal_reach(support)
+    up = _faces_up(depth_m, valid, lens, support, reach)
+    # The 3 x 3 spread of heights; no reading counts as neither high nor low.
+    high = cv2.dilate(np.where(valid, height, -np.inf).astype(np.float32), None)
+    low = cv2.erode(np.where(valid, height, np.inf).astype(np.float32), None)
+    with np.errstate(invalid="ignore"):
+        step = (high - low) > np.maximum(STEP_SIGMAS * sigma, MIN_STEP_M)
+    return Surface(height, sigma, up & valid, step & valid, slope, reach)
+
+
+def normal_reach(support: Support) -> int:
+    """How many pixels either side the depth's gradient is taken: errors that come in lumps
+    tilt a flat top over the lump's width, so look wider."""
+    if support.lump_px > 1.0:
+        return min(int(math.ceil(support.lump_px)) + 1, 6)
+    return NORMAL_REACH_PX
+
+
+def _faces_up(
+    depth_m: Float32Array, valid: BoolArray, lens: Intrinsics, support: Support, reach: int
+) -> BoolArray:
+    """Whether the surface through each pixel faces up (see the module docstring)."""
+    rows, cols = depth_m.shape
+    window = 2 * reach + 1
+    filled = np.where(valid, depth_m, 0.0).astype(np.float32)
+    weight = cv2.boxFilter(valid.astype(np.float32), -1, (window, window), normalize=False)
+    total = cv2.boxFilter(filled, -1, (window, window), normalize=False)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        smooth = total / weight
+    smooth[weight < 0.5 * window * window] = np.nan
+    dz_u = np.full_like(smooth, np.nan)
+    dz_v = np.full_like(smooth, np.nan)
+    dz_u[:, reach:-reach] = (smooth[:, 2 * reach :] - smooth[:, : -2 * reach]) / (2 * reach)
+    dz_v[reach:-reach, :] = (smooth[2 * reach :, :] - smooth[: -2 * reach, :]) / (2 * reach)
+    u = np.arange(cols, dtype=np.float32)[None, :] - np.float32(lens.cx)
+    v = np.arange(rows, dtype=np.float32)[:, None] - np.float32(lens.cy)
+    nx = -np.float32(lens.fx) * dz_u
+    ny = -np.float32(lens.fy) * dz_v
+    nz = smooth + u * dz_u + v * dz_v
+    # n points away from the camera for a surface facing it; the support's normal toward it.
+    s = support.normal_camera
+    along = -(nx * np.float32(s[0]) + ny * np.float32(s[1]) + nz * np.float32(s[2]))
+    norm = np.sqrt(nx * nx + ny * ny + nz * nz)
+    cos_max = np.float32(math.cos(math.radians(MAX_TOP_TILT_DEG)))
+    with np.errstate(invalid="ignore"):
+        result: BoolArray = along > cos_max * norm
+    return result

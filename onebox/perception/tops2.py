@@ -1,0 +1,320 @@
+"""Tops: the flat, upward-facing surfaces standing on the support, each measured as an oriented
+rectangle.
+
+Contract: :func:`find_tops` takes the depth picture, its :class:`~onebox.perception.surface.
+Surface` reading, the lens, the support, optionally the colour picture (registered with the
+depth) and the finder's settings, and returns :class:`Tops`: one row per top, every top measured
+at once. No I/O, no loop over pixels or over tops in Python.
+
+How:
+
+1. **Standing pixels facing up**: higher than ``min_height_m`` and 4 sigma(z) above the
+   support, facing up (:mod:`onebox.perception.surface`), not on a depth step. An opening
+   (3 x 3) takes off single pixels and spurs a pixel wide (flying pixels, stereo streaks).
+2. **Connected regions** of them (4-connected, OpenCV), the pixels cut at steps grown back
+   into the region beside them when at its local height (twice: a step cuts a pixel either
+   side).
+3. **Seams seen only in colour**: two touching cartons of one height are one region in depth;
+   the thin dark line between them (or a colour edge) runs straight across the region from
+   side to side, which print and labels do not. Every region is split where such a line
+   crosses it (:mod:`onebox.perception.seams`) and measured again.
+4. **Each top measured**: its plane (least squares on its points, in the support's
+   coordinates), its oriented rectangle (the angle whose rectangle round the region's outline
+   is smallest; the extent along each axis taken over the pixels whose cross-section is at
+   least ``PROFILE_SHARE`` of the fullest, so a ragged or smeared edge's stray pixels do not
+   stretch it), its area (each pixel's footprint on the plane), how full its rectangle is and
+   how flat it is.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from onebox.geometry import Intrinsics
+from onebox.perception import kernels, seams
+from onebox.perception.support import Support
+from onebox.perception.surface import Surface, _rays
+
+Float32Array = npt.NDArray[np.float32]
+Float64Array = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int32]
+BoolArray = npt.NDArray[np.bool_]
+
+ANGLES = np.radians(np.arange(0.0, 90.0, 1.0))
+"""The rectangle's angles tried (a rectangle repeats every quarter turn)."""
+PROFILE_SHARE = 0.2
+"""A cross-section holding less than this share of the top's fullest is a stray (a spur, a
+smear), not the top's extent."""
+MIN_PIXELS = 12
+"""Fewer pixels than this are no top (speckles), whatever their footprint."""
+SEAM_ROUNDS = 3
+"""Splitting at seams and measuring again, at most this often (a seam that crosses one part
+only shows once the other is split off)."""
+
+
+@dataclass(frozen=True)
+class Tops:
+    """Every top of a picture; row k of each array is top k (``labels`` holds k + 1)."""
+
+    labels: IntArray
+    """H x W: 0 for no top, k + 1 for top k's pixels."""
+    height_m: Float64Array
+    """The top plane's height above the support at the rectangle's middle."""
+    middle_ab: Float64Array
+    """(n, 2): the rectangle's middle in the support plane's coordinates (basis e1, e2)."""
+    axis_ab: Float64Array
+    """(n, 2): unit vector along the rectangle's length, in the same coordinates."""
+    length_m: Float64Array
+    width_m: Float64Array
+    area_m2: Float64Array
+    """The top's area seen (each pixel's footprint on the plane, summed)."""
+    fill: Float64Array
+    """Area seen over the rectangle's."""
+    rms_m: Float64Array
+    """How far the top's points lie off its plane (root mean square)."""
+    tilt_deg: Float64Array
+    """The top plane's angle to the support."""
+    depth_m: Float64Array
+    """The top's mean distance along the optical axis."""
+    sigma_m: Float64Array
+    """The depth noise at that distance."""
+    pixels: IntArray
+    on_border: BoolArray
+    """Touches the picture's border: cut off, its extent unknown."""
+    basis: Float64Array
+    """(3, 3): e1, e2 and the support normal, rows, in the optical frame."""
+
+    def __len__(self) -> int:
+        return len(self.height_m)
+
+
+def plane_basis(support: Support) -> Float64Array:
+    """Two unit vectors in the support plane and its normal (rows), in the optical frame: e1
+    is the optical x axis laid onto the plane."""
+    n = np.asarray(support.normal_camera, dtype=np.float64)
+    e1 = np.array([1.0, 0.0, 0.0]) - n[0] * n
+    if np.linalg.norm(e1) < 1e-6:
+        e1 = np.array([0.0, 1.0, 0.0]) - n[1] * n
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(n, e1)
+    return np.stack([e1, e2, n])
+
+
+def standing_regions(surface: Surface, min_height_m: float, max_height_m: float | None) -> IntArray:
+    """Steps 1 and 2 of the module docstring: the labels of connected upward-facing regions."""
+    height = surface.height_m
+    with np.errstate(invalid="ignore"):
+        standing = surface.up & (height > np.maximum(min_height_m, 4.0 * surface.sigma_m))
+        if max_height_m is not None:
+            standing &= height < max_height_m
+    core = (standing & ~surface.step).astype(np.uint8)
+    core = cv2.morphologyEx(core, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+    _, labels = cv2.connectedComponents(core, connectivity=4, ltype=cv2.CV_32S)
+    # Grow the regions back over the pixels cut at steps and the edge pixels whose normal the
+    # smoothing turned, where at the region's local height.
+    with np.errstate(invalid="ignore"):
+        standing = (height > np.maximum(min_height_m, 4.0 * surface.sigma_m)) & (
+            height < (np.inf if max_height_m is None else max_height_m)
+        )
+    for _ in range(surface.reach_px + 2):
+        inside = (labels > 0).astype(np.float32)
+        summed = cv2.boxFilter(np.where(labels > 0, height, 0.0).astype(np.float32), -1, (3, 3),
+                               normalize=False)
+        count = cv2.boxFilter(inside, -1, (3, 3), normalize=False)
+        neighbour = cv2.dilate(labels.astype(np.float32), None)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            local = summed / count
+            grow = (
+                standing
+                & (labels == 0)
+                & (neighbour > 0)
+                & (np.abs(height - local) < np.maximum(3.0 * surface.sigma_m, 0.002))
+            )
+        labels[grow] = neighbour[grow].astype(np.int32)
+    return labels
+
+
+def find_tops(
+    depth_m: Float32Array,
+    surface: Surface,
+    lens: Intrinsics,
+    support: Support,
+    colour: npt.NDArray[np.uint8] | None,
+    min_height_m: float,
+    max_height_m: float | None = None,
+) -> Tops:
+    """Every top in the picture (see the module docstring)."""
+    labels = standing_regions(surface, min_height_m, max_height_m)
+    count = int(labels.max())
+    sizes = np.bincount(labels.ravel(), minlength=count + 1)
+    keep = sizes >= MIN_PIXELS
+    keep[0] = False
+    renumber = np.zeros(count + 1, dtype=np.int32)
+    renumber[keep] = np.arange(1, int(keep.sum()) + 1, dtype=np.int32)
+    labels = renumber[labels]
+    seam = None if colour is None else seams.seam_map(colour, depth_m, lens)
+    basis = plane_basis(support)
+    tops = _measure(labels, depth_m, surface, lens, basis)
+    if seam is None:
+        return tops
+    for _ in range(SEAM_ROUNDS):
+        split = seams.split_at_seams(tops, seam, depth_m, lens)
+        if split is None:
+            break
+        tops = _measure(split, depth_m, surface, lens, basis)
+    return tops
+
+
+@dataclass(frozen=True)
+class Points:
+    """The pixels of every top, flat: index into the picture, top, plane coordinates."""
+
+    index: npt.NDArray[np.intp]
+    top: IntArray
+    a: Float64Array
+    b: Float64Array
+    h: Float64Array
+    z: Float64Array
+
+
+def points_of(
+    labels: IntArray, depth_m: Float32Array, surface: Surface, lens: Intrinsics,
+    basis: Float64Array,
+) -> Points:
+    """Every top pixel's point in the support plane's coordinates."""
+    rows, cols = labels.shape
+    index = np.flatnonzero(labels)
+    top = labels.ravel()[index] - 1
+    r, c = np.divmod(index, cols)
+    across, down = _rays(lens, cols, rows)
+    z = depth_m.ravel()[index].astype(np.float64)
+    x = across[c] * z
+    y = down[r] * z
+    a = basis[0, 0] * x + basis[0, 1] * y + basis[0, 2] * z
+    b = basis[1, 0] * x + basis[1, 1] * y + basis[1, 2] * z
+    h = surface.height_m.ravel()[index].astype(np.float64)
+    return Points(index, top.astype(np.int32), a, b, h, z)
+
+
+def _measure(
+    labels: IntArray,
+    depth_m: Float32Array,
+    surface: Surface,
+    lens: Intrinsics,
+    basis: Float64Array,
+) -> Tops:
+    rows, cols = labels.shape
+    n = int(labels.max())
+    pts = points_of(labels, depth_m, surface, lens, basis)
+    top, a, b, h, z = pts.top, pts.a, pts.b, pts.h, pts.z
+    pixels = np.bincount(top, minlength=n).astype(np.int32)
+    safe = np.maximum(pixels, 1).astype(np.float64)
+
+    def mean(v: Float64Array) -> Float64Array:
+        result: Float64Array = np.bincount(top, weights=v, minlength=n) / safe
+        return result
+
+    mean_a, mean_b, mean_h, mean_z = mean(a), mean(b), mean(h), mean(z)
+    # The top's plane, h = alpha a + beta b + gamma, by least squares about its middle.
+    da, db, dh = a - mean_a[top], b - mean_b[top], h - mean_h[top]
+    saa, sab, sbb = mean(da * da), mean(da * db), mean(db * db)
+    sah, sbh = mean(da * dh), mean(db * dh)
+    det = saa * sbb - sab * sab
+    ok = det > 1e-18
+    det = np.where(ok, det, 1.0)
+    alpha = np.where(ok, (sah * sbb - sbh * sab) / det, 0.0)
+    beta = np.where(ok, (sbh * saa - sah * sab) / det, 0.0)
+    residual = dh - alpha[top] * da - beta[top] * db
+    rms = np.sqrt(mean(residual * residual))
+    tilt = np.degrees(np.arctan(np.hypot(alpha, beta)))
+
+    # The rectangle's angle: the smallest rectangle round the outline.
+    flat_labels = labels.astype(np.float32)
+    edge = (labels > 0) & (
+        (cv2.erode(flat_labels, None) != flat_labels)
+        | (cv2.dilate(flat_labels, None) != flat_labels)
+    )
+    on_edge = edge.ravel()[pts.index]
+    spans = kernels.extents_at_angles(top[on_edge], a[on_edge], b[on_edge], n, ANGLES)
+    areas = (spans[:, :, 1] - spans[:, :, 0]) * (spans[:, :, 3] - spans[:, :, 2])
+    angle = ANGLES[np.argmin(np.where(np.isfinite(areas), areas, np.inf), axis=1)]
+    cos, sin = np.cos(angle), np.sin(angle)
+    p = a * cos[top] + b * sin[top]
+    q = b * cos[top] - a * sin[top]
+
+    # Each pixel's footprint on the support plane, and the top's along each axis.
+    fx_fy = lens.fx * lens.fy
+    slope = np.abs(surface.slope.ravel()[pts.index]).astype(np.float64)
+    across, down = _rays(lens, cols, rows)
+    r, c = np.divmod(pts.index, cols)
+    ray_length = np.sqrt(1.0 + across[c].astype(np.float64) ** 2 + down[r] ** 2)
+    footprint = z * z * ray_length / (fx_fy * np.maximum(slope, 0.05))
+    area = np.bincount(top, weights=footprint, minlength=n)
+    step = np.sqrt(mean(footprint))  # one pixel's side on the plane
+
+    keep = _within_profile(top, p, step, n) & _within_profile(top, q, step, n)
+    box = kernels.extents(np.where(keep, top, -1).astype(np.int32), p, q, n)
+    box[:, 0] -= 0.5 * step
+    box[:, 1] += 0.5 * step
+    box[:, 2] -= 0.5 * step
+    box[:, 3] += 0.5 * step
+    extent_p = box[:, 1] - box[:, 0]
+    extent_q = box[:, 3] - box[:, 2]
+    mid_p = 0.5 * (box[:, 0] + box[:, 1])
+    mid_q = 0.5 * (box[:, 2] + box[:, 3])
+    middle = np.stack([mid_p * cos - mid_q * sin, mid_p * sin + mid_q * cos], axis=1)
+    along_p = extent_p >= extent_q
+    axis = np.where(along_p[:, None], np.stack([cos, sin], 1), np.stack([-sin, cos], 1))
+    # Lengths on the top's own plane (it may lean): stretch by the slope along each axis.
+    slope_p = np.hypot(1.0, alpha * cos + beta * sin)
+    slope_q = np.hypot(1.0, beta * cos - alpha * sin)
+    extent_p = extent_p * slope_p
+    extent_q = extent_q * slope_q
+    length = np.maximum(extent_p, extent_q)
+    width = np.minimum(extent_p, extent_q)
+    height = mean_h + alpha * (middle[:, 0] - mean_a) + beta * (middle[:, 1] - mean_b)
+    fill = area * np.hypot(1.0, np.hypot(alpha, beta)) / np.maximum(length * width, 1e-12)
+
+    border = np.zeros_like(labels, dtype=bool)
+    border[[0, -1], :] = True
+    border[:, [0, -1]] = True
+    on_border = np.bincount(labels[border], minlength=n + 1)[1:] > 0
+    sigma = np.bincount(top, weights=surface.sigma_m.ravel()[pts.index], minlength=n) / safe
+    return Tops(
+        labels=labels,
+        height_m=height,
+        middle_ab=middle,
+        axis_ab=axis,
+        length_m=length,
+        width_m=width,
+        area_m2=area,
+        fill=fill,
+        rms_m=rms,
+        tilt_deg=tilt,
+        depth_m=mean_z,
+        sigma_m=sigma,
+        pixels=pixels,
+        on_border=on_border,
+        basis=basis,
+    )
+
+
+def _within_profile(top: IntArray, coordinate: Float64Array, step: Float64Array, n: int) -> BoolArray:
+    """Whether each pixel's cross-section along ``coordinate`` (bins a pixel wide) holds at
+    least PROFILE_SHARE of its top's fullest."""
+    start = np.full(n, np.inf)
+    np.minimum.at(start, top, coordinate)
+    bins = np.floor((coordinate - start[top]) / step[top]).astype(np.int64)
+    width = np.zeros(n, dtype=np.int64)
+    np.maximum.at(width, top, bins + 1)
+    offset = np.concatenate([[0], np.cumsum(width)[:-1]])
+    slot = offset[top] + bins
+    counts = np.bincount(slot, minlength=int(width.sum()))
+    fullest = np.maximum.reduceat(counts, offset) if n else counts
+    result: BoolArray = counts[slot] >= PROFILE_SHARE * fullest[top]
+    return result
