@@ -36,8 +36,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from onebox.perception.boxes import BoxFinder, FinderSettings
-from onebox.perception.tops import MAX_PIXELS
+from onebox.perception.boxes import MAX_PIXELS, FinderSettings
+from onebox.perception.stream import BoxFinder
 from onebox.testing.judged import Judged, judge, render_scene
 from onebox.world import spec
 from onebox.world.noise import PRESETS, NoiseSpec

@@ -56,8 +56,8 @@ from onebox import bus, geometry, keys, memory, pictures, settings, sync
 from onebox.errors import SettingError
 from onebox.geometry import FrameError, FrameTree, matrix_of
 from onebox.perception import register, seed
-from onebox.perception.boxes import Box, BoxFinder, FinderSettings, Found
-from onebox.perception.tops import MAX_PIXELS
+from onebox.perception.boxes import MAX_PIXELS, Box, FinderSettings, Found
+from onebox.perception.stream import BoxFinder
 from onebox.rectify import Rectifier, lens_of
 from onebox.sync import StampClock, Stamped, StampMatcher
 from schemas import (

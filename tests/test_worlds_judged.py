@@ -9,7 +9,8 @@ from dataclasses import replace
 
 import pytest
 
-from onebox.perception.boxes import BoxFinder, FinderSettings
+from onebox.perception.boxes import FinderSettings
+from onebox.perception.stream import BoxFinder
 from onebox.testing.judged import Judged, judge, render_scene
 from onebox.world.noise import PRESETS
 from onebox.world.random_scene import looking_across, random_pallet, random_scene

@@ -1,141 +1,104 @@
-"""Every box in a depth picture: oriented, full size, topmost first, with stable ids in a stream.
+"""Every box in a depth picture: oriented, measured, topmost first, with stable ids in a stream.
 
 Contract: :func:`find_boxes` takes a depth picture (H x W float32 metres; NaN, 0, negative and
 inf are no reading), the lens (CameraInfo convention: the middle of pixel u is at u), the
 camera's pose (optical frame -> world, 4 x 4) or None, optionally the colour picture of the
-same size (H x W x 3 uint8) and how many whole pixels it lies off the depth, and
-:class:`FinderSettings`. It returns :class:`Found`: the support plane and the boxes, highest top
-first, in the world frame with a pose and in the optical frame without one ("up" is then the
-support normal, toward the camera). :class:`BoxFinder` does the same for a stream, keeping the
-support while it still fits, measuring how far the colour lies off the depth
-(:mod:`onebox.perception.register`) on its first picture and every ``register_every`` after,
-and giving each box an id that stays while the box does not move. No I/O here.
+same size (H x W x 3 uint8, RGB) and how many whole pixels it lies off the depth, and
+:class:`FinderSettings`. It returns :class:`Found`: the support plane and the boxes, highest
+top first, in the world frame with a pose and in the optical frame without one ("up" is then
+the support normal, toward the camera). :class:`BoxFinder` does the same for a stream (see
+:mod:`onebox.perception.stream`). No I/O here.
 
-How a picture is read (whole-array work; Python loops only over tops, a few scalars each).
-Steps 2 to 5 are :mod:`onebox.perception.tops`, step 6 :mod:`onebox.perception.bases`; this
-module reads the picture at its size, fits the support and reports:
+The pipeline, one module a physical effect:
 
-0. Pictures larger than ``max_pixels`` (default 848 x 480: a D435's depth picture and an
-   Azure Kinect's 640 x 576 are read whole) are read at every k-th pixel, the lens scaled
-   exactly (1280 x 720 is read as 640 x 360).
-1. The support (:mod:`onebox.perception.support`): the lowest large plane facing up, its noise
-   and how wide the noise's lumps are measured on it. Where the depth noise there is 15 mm or
-   more (a D435 past 2 m), steps 2 to 7 run twice: on the picture, then on its 3 x 3 median
-   (:func:`onebox.perception.segment.median3`, its noise and lumps measured again against the
-   plane), whose boxes are added where they share no room with one found already; the two
-   readings run side by side, the median's in a thread of its own. Four sigma, the least
-   step the finder trusts, was taller there than many a box; the median keeps edges and
-   steps and cuts the noise about 2.4-fold, but read alone it lost bases and seams that the
-   picture's own readings give.
-2. Heights above it for every pixel, one multiply-add (``depth * slope + offset``, the slope
-   cached per lens and plane); only the rows and columns holding standing pixels go further.
-3. Standing pixels split into pieces at height steps and colour edges
-   (:mod:`onebox.perception.segment`). Every piece's top height at once: the fullest window of
-   a per-piece height histogram (window = the tolerance, 3 sigma(z), at least 1.5 mm), then the
-   mean of the readings within the tolerance. The top is the readings within 4 mm of that
-   (``FLAT_REACH_M``, or the tolerance if more: a carton's lid bulges or sags). Tops grow back
-   into cut pixels and small pieces at their height (3 pixels, the larger top first), and
-   across bands (a seam's line cut out by colour edges on both sides, under ~1 cm wide) until
-   they meet in the band's middle.
-4. All tops measured together from their grouped pixels: area (holes filled by each row's and
-   column's span), the top's plane (moments on a sample), the outline and, for each outline
-   pixel, what lies past it: rising (hidden by something standing on or in front of the top,
-   also when first seen past a band of no reading), dropping (a real edge) or no reading
-   (dropout). Every rectangle is fitted in one batched
-   pass (:func:`onebox.perception.rectangle.fit_rectangles`). A top that straight lines of
-   colour edges or of dark valleys a few pixels wide (a seam's shadow, with no step between
-   neighbours as large as an edge's) cross from side to side, parallel to its rectangle's
-   sides and at least 3 cm from either end, with the top going on past them in one shade on
-   both sides along 80 % of them, is cartons of one shade: it splits at every such line at
-   once (rows and columns), each connected part at its own height, and the tops are measured
-   again (a second look finds a seam that crosses one part only).
-5. Not a box: a top touching the picture's border (cut off), smaller than ``min_top_area_m2``
-   (or (3 sigma)^2 where the depth is noisy), seen narrower than 1 cm, not parallel to the
-   support (a top narrower than its noise: by its plane along the rays, if it stands free;
-   a long top seen whole, within what the noise's lumps tilt a flat top of its size),
-   not flat, filling less than ``min_score`` of its rectangle (a disc fills pi/4;
-   under noise of 3 mm or more, a top seen whole by its hull; where a taller object in front
-   hides part of the rectangle, of the part seen, if every side is seen along part of it and
-   the outline seen hugs the sides), or curved:
-   loosening the height tolerance four-fold widens a curved top (cylinder, ball) but not a
-   box's, whose sides drop straight down.
-6. What each box stands on. Lines of probe points go out from each side at the height of each
-   lower level (the support and every lower top); along each line the first surface seen (not
-   the box itself, nothing higher in front) says whether the level is there or lower. A level
-   counts when seen on two probes with hardly anything lower seen, or on two opposite sides;
-   the box's own ledge (a rim just past its outline) counts with less, and when seen on every
-   line of one side with no top at its height (a box underneath, overhung on the other sides);
-   a lower top counts only if it reaches under the box (its rectangle holds the box's middle,
-   it is no box, or the box lies past one of its hidden sides), unless the box meets one of
-   its sides end to end, the top goes out from it as far as a carton and the box would be a
-   slab on it: the next carton of a row, a little lower (a carton's top that the box on it
-   keeps from being a box too); a piece that is no box and
-   lies largely inside the box's rectangle is the box's own side face seen at a slant (nothing
-   under a box's top is seen), never its base. The highest such level is the base (of tops
-   at its height, the one whose rectangle holds the box's middle); a box that sees none takes
-   the base most of its touching neighbours have. A box left on the support seen past one
-   side only (or by its neighbours) takes the higher base of a touching box of its height,
-   when a level there that is no box's top may reach under it: past a load's edge the floor
-   is seen, the pallet's rim there out of sight or lost in the dropout. A box still without
-   a base stands on the platform it stands over, else the support. A top that boxes stand on
-   past its hidden side,
-   or that is mostly covered, is a platform (a pallet's top): a level, never reported as a
-   box; so is a top walled in on two sides or more at the height two touching boxes stand
-   at (the pallet seen where a carton is missing). On a platform, a side in the shadow of a
-   taller carton between it and the camera runs halfway into the shadow (packed cartons
-   touch; the shadow's middle is never off by more than half of it).
-   A top with a hidden side that something standing well off it (a taller object in front)
-   may hide by more than half its seen extent is left out: its size is unknown.
-   Then each box's side faces (:mod:`onebox.perception.faces`): faces that end well above
-   the base raise it to the level between where they are last seen and where the camera sees
-   under the box (or to their bottom, when no level is there: a box over one it hides), and a
-   top that box hides a side of becomes a level. Faces running flush down onto a box of
-   nearly the same footprint end where their colour changes, level across the face, unless a
-   top at that height reaches out past that side (a box beside, whose top meets the face).
-   A box taken to stand on a box's top whose face is seen going on down past that top, on a
-   side the lower box has no face in the plane of (and the lower top cannot go on under the
-   box that way), stands beside it, lower: on the highest level under where the face is seen.
-7. The height is the top's distance from its base; the centre is the rectangle's middle less
-   half the height along the normal.
+1. :mod:`~onebox.perception.support`: the surface the boxes stand on (RANSAC, then least
+   squares) and the depth noise measured on it, growing with distance (sigma(z)).
+2. :mod:`~onebox.perception.surface`: every pixel's height above it, which way it faces, where
+   the depth steps.
+3. :mod:`~onebox.perception.tops`: connected flat regions facing up, split where a seam seen
+   only in colour crosses them (:mod:`~onebox.perception.seams`), each measured as an oriented
+   rectangle on its own plane.
+4. Here: what lies round each top (:func:`_look_round`): something nearer hiding a side (the
+   extent along that side is then a lower bound), a lower level, or nothing seen; what each
+   top stands on (the highest lower top under its middle, else the support); which tops are
+   boxes (flat, level, filling their rectangle: round, curved and ragged things do not); and
+   the report.
 """
 
 from __future__ import annotations
 
 import math
-import os
-from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
 
 from onebox.geometry import Intrinsics
-from onebox.perception import bases, register, segment, tops
-from onebox.perception.support import (
-    Support,
-    fit_support,
-    lump_width,
-    noise_against,
-    support_holds,
-)
-from onebox.perception.tops import FinderSettings, Plateau
-
-__all__ = ["Box", "BoxFinder", "FinderSettings", "Found", "find_boxes"]
-
-SMOOTH_SIGMA_M = 0.015
-"""Depth noise (sigma at the support's distance) from which the picture's 3 x 3 median is read
-too: there 4 sigma, the least step the finder trusts, is as tall as many a box."""
-
-SHARED_HEIGHT_M = 0.01
-"""Two boxes whose heights overlap by more than this (and whose footprints overlap) share
-room: one is not standing on the other."""
-SHARED_FOOTPRINT = 0.25
-"""...and whose footprints overlap by more than this share of the smaller one's: one box
-found in both pictures, not two neighbours, one of them misread in one picture."""
+from onebox.perception import register
+from onebox.perception.support import Support, fit_support
+from onebox.perception.surface import read_surface
+from onebox.perception.tops import Tops, find_tops
 
 Float32Array = npt.NDArray[np.float32]
 Float64Array = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
 Vec3 = tuple[float, float, float]
+
+MAX_PIXELS = 848 * 480
+"""Larger pictures are read at every k-th pixel (a D435's depth and an Azure Kinect's 640 x 576
+are read whole; 1280 x 720 as 640 x 360)."""
+PROBES_PER_SIDE = 9
+"""Points looked at just past each side of a top."""
+PROBE_REACH_M = 0.012
+"""...this far past it (and at least two pixels): past a smeared edge, within a gap."""
+HIDDEN_SHARE = 0.3
+"""A side is hidden when this share of its probes see something nearer than the top."""
+HIDDEN_FILL = 0.6
+"""A top with a hidden side must fill this much of the rectangle seen (a whole one: min_score)."""
+CORNER_FILL = 0.7
+"""A box's top reaches into its rectangle's corners; a disc, a rounded tin or a bowl's bottom
+does not."""
+MIN_WIDTH_M = 0.015
+"""A top narrower than this is an edge or a rim, not a box."""
+FLAT_SIGMAS = 3.0
+"""A top lies within this many sigma(z) of its plane (root mean square)..."""
+FLAT_M = 0.004
+"""...or within this, whatever the noise (a carton's lid bulges)."""
+
+
+@dataclass(frozen=True)
+class FinderSettings:
+    """Tolerances; the depth noise's are measured on the support plane."""
+
+    min_height_m: float = 0.01
+    """Less than this above the surface is the surface."""
+    noise_sigma_m: float | None = None
+    """Depth noise; None estimates it from the support plane's residuals (growing as z^2)."""
+    table_z_m: float | None = None
+    """Skip the fit: the surface is the world plane z = table_z (needs a pose)."""
+    max_tilt_deg: float = 15.0
+    """A support plane may be this far from world up (with a pose)."""
+    workspace: tuple[tuple[float, float], tuple[float, float], tuple[float, float]] | None = None
+    """World (or optical-frame) x, y, z limits of a box's top middle; nothing reported outside."""
+    max_height_m: float | None = None
+    """A ceiling above the surface; anything higher is ignored."""
+    min_top_area_m2: float = 0.0004
+    """Tops smaller than this (2 x 2 cm) are no boxes: speckles, clumps, flying pixels."""
+    min_score: float = 0.85
+    """A top seen whole must fill this share of its rectangle (a disc fills 0.785)."""
+    max_top_tilt_deg: float = 15.0
+    """A box's top is parallel to the surface under it within this angle (lids bulge, lean)."""
+    keep_cut_off: bool = False
+    """Report tops cut off by the picture's border (their size is then a lower bound)."""
+    match_distance_m: float = 0.02
+    """BoxFinder: a box within this of last picture's box (and of a similar size) keeps its id."""
+    max_pixels: int | None = MAX_PIXELS
+    """Larger pictures are read at every k-th pixel to keep camera rate; None reads them all."""
+    colour_shift: tuple[int, int] | None = None
+    """BoxFinder: the colour picture's shift against the depth, (dy, dx) whole pixels (see
+    :mod:`onebox.perception.register`); None measures it from the pictures."""
+    register_every: int = 30
+    """BoxFinder: measure the colour's shift on the first picture and every this many after."""
 
 
 @dataclass(frozen=True)
@@ -152,7 +115,7 @@ class Box:
     """The length axis's angle about world z (about the support normal without a pose), from
     the frame's x axis (the support plane's projection of it), in (-90, 90]."""
     score: float
-    """0..1: the top's area over its rectangle's, times how flat the top is."""
+    """0..1: how full the top's rectangle is, times how flat the top is."""
     top_pixels: int
     top_middle: Vec3
     on: int | None = None
@@ -161,6 +124,11 @@ class Box:
     """Stable across a stream (BoxFinder); -1 from find_boxes."""
     hidden_sides: int = 0
     """Sides of the top another object hides: the size along them is a lower bound."""
+    height_seen: bool = True
+    """Whether the level it stands on is seen beside it; when not (a carton in a full layer),
+    the height is measured to the level its neighbours stand on and is only as good as that."""
+    name: str = ""
+    """The catalogue entry its top matches, if a catalogue is used."""
 
 
 @dataclass(frozen=True)
@@ -170,6 +138,21 @@ class Found:
     support: Support | None
     boxes: list[Box] = field(default_factory=list)
     frame: str = "camera"
+
+
+def read_stride(shape: tuple[int, ...], max_pixels: int | None) -> int:
+    """Every how many pixels a picture is read (1: all)."""
+    if max_pixels is None or shape[0] * shape[1] <= max_pixels:
+        return 1
+    return math.ceil(math.sqrt(shape[0] * shape[1] / max_pixels))
+
+
+def clean_depth(depth_m: npt.NDArray[np.floating]) -> Float32Array:
+    """Float32 metres with every kind of no reading (0, negative, inf) as NaN."""
+    depth = np.array(depth_m, dtype=np.float32, copy=True)
+    with np.errstate(invalid="ignore"):
+        depth[~(depth > 0) | ~np.isfinite(depth)] = np.nan
+    return depth
 
 
 def find_boxes(
@@ -183,7 +166,7 @@ def find_boxes(
 ) -> Found:
     """Every box in the picture (see the module docstring); ``support`` skips the plane fit;
     ``colour_shift`` is how far the colour lies off the depth (:mod:`register`)."""
-    depth = np.asarray(depth_m, dtype=np.float32)
+    depth = clean_depth(depth_m)
     frame = "world" if camera_to_world is not None else "camera"
     if colour is not None:
         colour = register.in_register(colour, colour_shift)
@@ -191,8 +174,8 @@ def find_boxes(
     if stride > 1:
         # Pixel k * u' is pixel u' of the coarse picture: its ray is unchanged, so the lens
         # scales exactly (middle of pixel u at u: cx / k, not (cx + 0.5) / k - 0.5).
-        depth = depth[::stride, ::stride]
-        colour = None if colour is None else colour[::stride, ::stride]
+        depth = np.ascontiguousarray(depth[::stride, ::stride])
+        colour = None if colour is None else np.ascontiguousarray(colour[::stride, ::stride])
         lens = Intrinsics(lens.fx / stride, lens.fy / stride, lens.cx / stride, lens.cy / stride)
     if support is None:
         support = fit_support(
@@ -205,258 +188,185 @@ def find_boxes(
         )
     if support is None:
         return Found(None, [], frame)
-    from_median = None
-    if settings.noise_sigma_m is None and support.sigma_m > SMOOTH_SIGMA_M:
-        # The two readings share nothing but their inputs: the median's runs in a thread
-        # beside this one (NumPy's array work lets go of the interpreter).
-        from_median = _median_reader().submit(
-            _read, depth, lens, camera_to_world, colour, settings, support, median=True
-        )
-    boxes = _read(depth, lens, camera_to_world, colour, settings, support)
-    if from_median is not None:
-        boxes = _together(boxes, from_median.result(), support)
-    return Found(support, boxes, frame)
-
-
-_median_readers: dict[int, ThreadPoolExecutor] = {}
-
-
-def _median_reader() -> ThreadPoolExecutor:
-    """This process's thread for the median's reading (a forked child makes its own: its
-    parent's thread is not in it)."""
-    pid = os.getpid()
-    if pid not in _median_readers:
-        _median_readers[pid] = ThreadPoolExecutor(1, thread_name_prefix="onebox-median")
-    return _median_readers[pid]
-
-
-def _read(
-    depth: Float32Array,
-    lens: Intrinsics,
-    camera_to_world: Float64Array | None,
-    colour: npt.NDArray[np.uint8] | None,
-    settings: FinderSettings,
-    support: Support,
-    median: bool = False,
-) -> list[Box]:
-    """Steps 2 to 7 on one picture, or on its 3 x 3 median (its noise and lumps measured
-    again against the plane)."""
-    if median:
-        depth = segment.median3(depth)
-        support = replace(support, sigma_m=noise_against(depth, lens, support))
-        support = replace(support, lump_px=lump_width(depth, lens, support))
-    plateaus, height_m, labels_top = tops.plateaus(depth, lens, colour, settings, support)
-    if not plateaus:
-        return []
-    basis = tops.plane_basis(support, camera_to_world)
-    # Scraps of a carton's top round a box on it (strips, and a taped carton's flaps) are
-    # levels, not boxes, if that box is found to stand at their level; if it is not, the bases
-    # are found again with them as boxes.
-    candidates = [p for p in plateaus if p.is_box]
-    scraps = tops.scraps(candidates, plateaus)
-    scraps += [p for p in tops.flaps(candidates, plateaus) if p not in scraps]
-    fresh = [dict(vars(p)) for p in plateaus] if scraps else []
-    for scrap in scraps:
-        scrap.is_box = False
-    boxes = [p for p in plateaus if p.is_box]
-    bases.find_bases(boxes, plateaus, height_m, labels_top, lens, support, settings)
-    confirmed = {id(p) for p in tops.scraps(scraps, plateaus, standing=True)}
-    confirmed |= {id(p) for p in tops.flaps(scraps, plateaus, standing=True)}
-    if len(confirmed) < len(scraps):
-        for p, state in zip(plateaus, fresh, strict=True):
-            vars(p).update(state)
-            p.is_box = p.is_box and id(p) not in confirmed
-        boxes = [p for p in plateaus if p.is_box]
-        bases.find_bases(boxes, plateaus, height_m, labels_top, lens, support, settings)
-    bases.raise_to_faces(boxes, plateaus, depth, colour, lens, support, settings)
-    bases.shadowed_sides(boxes, support.offset_camera_m, settings)
-    afloat = bases.seen_under(boxes, depth, lens, support)
-    afloat |= bases.open_under(boxes, depth, lens, support)
-    reported = [
-        b
-        for b, floats in zip(boxes, afloat, strict=True)
-        if not floats
-        and not b.platform
-        and not bases.extent_unknown(b)
-        and b.rect is not None
-        and b.rect.width_m >= tops.MIN_WIDTH_M
-    ]
-    return _report(reported, support, basis, camera_to_world, settings)
-
-
-def _together(boxes: list[Box], more: list[Box], support: Support) -> list[Box]:
-    """``boxes`` and those of ``more`` that share no room with any of them (a box standing on
-    another shares none), highest top first, ``on`` pointing into the joined list."""
-    normal = np.asarray(support.normal)
-    added = [m for m in more if not any(_share_room(m, b, normal) for b in boxes)]
-    if not added:
-        return boxes
-    joined = boxes + added
-    # Where each box of ``more`` went: itself if added, else the box it shares room with.
-    where = {
-        id(m): next((i for i, b in enumerate(joined) if b is m or _share_room(m, b, normal)), -1)
-        for m in more
-    }
-    for k in range(len(boxes), len(joined)):
-        under = joined[k].on
-        if under is not None:
-            target = where[id(more[under])]
-            joined[k] = replace(joined[k], on=target if target >= 0 else None)
-    order = sorted(
-        range(len(joined)), key=lambda i: -float(normal @ np.asarray(joined[i].top_middle))
+    surface = read_surface(depth, lens, support)
+    tops = find_tops(
+        depth, surface, lens, support, colour, settings.min_height_m, settings.max_height_m
     )
-    rank = {old: new for new, old in enumerate(order)}
-    result = []
-    for i in order:
-        under = joined[i].on
-        result.append(joined[i] if under is None else replace(joined[i], on=rank[under]))
+    if len(tops) == 0:
+        return Found(support, [], frame)
+    round_ = _look_round(tops, depth, lens, support)
+    is_box = _boxes(tops, round_, settings)
+    base, on = _bases(tops, is_box)
+    return Found(
+        support, _report(tops, round_, is_box, base, on, support, camera_to_world, settings), frame
+    )
+
+
+@dataclass(frozen=True)
+class Round:
+    """What is seen just past each side of each top (n, 4 sides)."""
+
+    hidden: BoolArray
+    """Something nearer than the top hides the side."""
+    lower_m: Float64Array
+    """(n, 4, PROBES_PER_SIDE): the height seen past the side where it is lower than the top
+    (NaN where not)."""
+    cut_off: BoolArray
+    """Past the side lies outside the picture."""
+    sloping: BoolArray
+    """Past the side the surface goes on down at no level: a side face seen at a slant, or a
+    round or ragged body."""
+
+
+def _look_round(tops: Tops, depth_m: Float32Array, lens: Intrinsics, support: Support) -> Round:
+    """Probe points just past each side of every top, on the top's plane extended: what the
+    camera sees along the ray to each (see :class:`Round`)."""
+    n = len(tops)
+    rows, cols = depth_m.shape
+    e1, e2, normal = tops.basis
+    axis = tops.axis_ab
+    perp = np.stack([-axis[:, 1], axis[:, 0]], axis=1)
+    half = np.stack([tops.length_m, tops.width_m], axis=1) * 0.5
+    pixel = tops.depth_m / lens.fx
+    reach = np.maximum(PROBE_REACH_M, 2.5 * pixel)
+    # Sides: +length, -length, +width, -width; probes spread along each side's middle 80 %.
+    spread = np.linspace(-0.8, 0.8, PROBES_PER_SIDE)
+    outward = np.stack([axis, -axis, perp, -perp], axis=1)  # (n, 4, 2)
+    along = np.stack([perp, perp, axis, axis], axis=1)
+    out_len = np.stack([half[:, 0], half[:, 0], half[:, 1], half[:, 1]], axis=1) + reach[:, None]
+    along_len = np.stack([half[:, 1], half[:, 1], half[:, 0], half[:, 0]], axis=1)
+    ab = (
+        tops.middle_ab[:, None, None, :]
+        + outward[:, :, None, :] * out_len[:, :, None, None]
+        + along[:, :, None, :] * (along_len[:, :, None, None] * spread[None, None, :, None])
+    )  # (n, 4, P, 2)
+    lift = (tops.height_m - support.offset_camera_m)[:, None, None, None]
+    point = ab[..., :1] * e1 + ab[..., 1:] * e2 + lift * normal  # (n, 4, P, 3)
+    z_expected = point[..., 2]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = np.rint(lens.fx * point[..., 0] / z_expected + lens.cx)
+        v = np.rint(lens.fy * point[..., 1] / z_expected + lens.cy)
+    inside = (u >= 0) & (u < cols) & (v >= 0) & (v < rows) & (z_expected > 0)
+    ui = np.where(inside, u, 0).astype(np.intp)
+    vi = np.where(inside, v, 0).astype(np.intp)
+    seen = np.where(inside, depth_m[vi, ui], np.nan).astype(np.float64)
+    tolerance = np.maximum(3.0 * tops.sigma_m, 0.006)[:, None, None]
+    with np.errstate(invalid="ignore"):
+        nearer = seen < z_expected - tolerance * 4.0
+        seen_height = seen / z_expected * (tops.height_m[:, None, None] - support.offset_camera_m)
+        seen_height += support.offset_camera_m  # height along the same ray, by similar triangles
+        lower = np.where(seen > z_expected + tolerance, seen_height, np.nan)
+    hidden = nearer.mean(axis=2) >= HIDDEN_SHARE
+    cut_off = (~inside).mean(axis=2) >= HIDDEN_SHARE
+    # A lower surface at no level (neither the support nor any top) is the object going on
+    # down past its top: a box's own side face seen at a slant, or a curved or ragged body.
+    levels = np.concatenate([[0.0], tops.height_m])
+    off_level = np.min(np.abs(lower[..., None] - levels), axis=-1) > 2.0 * tolerance
+    sloping = (off_level & np.isfinite(lower)).mean(axis=2) >= 0.5
+    return Round(hidden, lower, cut_off, sloping)
+
+
+def _boxes(tops: Tops, round_: Round, settings: FinderSettings) -> BoolArray:
+    """Which tops are boxes' (see the module docstring)."""
+    hidden = round_.hidden.any(axis=1)
+    fill_needed = np.where(hidden, HIDDEN_FILL, settings.min_score)
+    flat = tops.rms_m <= np.maximum(FLAT_SIGMAS * tops.sigma_m, FLAT_M)
+    result: BoolArray = (
+        (tops.area_m2 >= settings.min_top_area_m2)
+        & (tops.width_m >= MIN_WIDTH_M)
+        & (tops.tilt_deg <= settings.max_top_tilt_deg)
+        & flat
+        & (tops.fill >= fill_needed)
+        & (tops.corners >= CORNER_FILL)
+        & (round_.sloping.sum(axis=1) <= 2)
+    )
+    if not settings.keep_cut_off:
+        result &= ~tops.on_border & ~round_.cut_off.any(axis=1)
     return result
 
 
-def _share_room(a: Box, b: Box, normal: Float64Array) -> bool:
-    """Whether two boxes are one box seen twice: their heights along ``normal`` overlap by more
-    than a centimetre, and their footprints (rectangles across ``normal``) by more than
-    :data:`SHARED_FOOTPRINT` of the smaller one. Neighbours, or a box one picture merged with
-    its neighbour, overlap by a sliver at most."""
-    half = []
-    for box in (a, b):
-        top = float(normal @ np.asarray(box.top_middle))
-        half.append((top - box.size[2], top))
-    if min(half[0][1], half[1][1]) - max(half[0][0], half[1][0]) <= SHARED_HEIGHT_M:
-        return False
-    apart = np.asarray(a.top_middle) - np.asarray(b.top_middle)
-    apart -= (apart @ normal) * normal
-    if np.linalg.norm(apart) >= 0.5 * (math.hypot(*a.size[:2]) + math.hypot(*b.size[:2])):
-        return False  # the circles round their footprints do not meet
-    across = tops.cross(normal, np.array([1.0, 0.0, 0.0]))
-    if np.linalg.norm(across) < 0.5:
-        across = tops.cross(normal, np.array([0.0, 1.0, 0.0]))
-    plane = np.stack([across / np.linalg.norm(across), tops.cross(normal, across)])
-    outlines = []
-    for box in (a, b):
-        x, y, z, w = box.quaternion_xyzw
-        length = np.array([1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)])
-        width = tops.cross(normal, length)
-        middle = np.asarray(box.top_middle)
-        corners = [
-            middle + sx * box.size[0] / 2 * length + sy * box.size[1] / 2 * width
-            for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))
-        ]
-        outlines.append(np.array(corners) @ plane.T)
-    smaller = min(box.size[0] * box.size[1] for box in (a, b))
-    return _overlap_area(outlines[0], outlines[1]) > SHARED_FOOTPRINT * smaller
-
-
-def _overlap_area(p: Float64Array, q: Float64Array) -> float:
-    """The area two convex polygons (corners in order, n x 2) share: ``p`` clipped by each of
-    ``q``'s sides in turn (Sutherland-Hodgman)."""
-    orient = 1.0 if _signed_area(q) >= 0 else -1.0
-    poly = list(p)
-    for k in range(len(q)):
-        if not poly:
-            return 0.0
-        s, e = q[k], q[(k + 1) % len(q)]
-        edge = e - s
-
-        def side(pt: Float64Array, s: Float64Array = s, edge: Float64Array = edge) -> float:
-            return orient * float(edge[0] * (pt[1] - s[1]) - edge[1] * (pt[0] - s[0]))
-
-        clipped = []
-        for i, cur in enumerate(poly):
-            prev = poly[i - 1]
-            sc, sp = side(cur), side(prev)
-            if sc >= 0:
-                if sp < 0:
-                    clipped.append(prev + (cur - prev) * (sp / (sp - sc)))
-                clipped.append(cur)
-            elif sp >= 0:
-                clipped.append(prev + (cur - prev) * (sp / (sp - sc)))
-        poly = clipped
-    return abs(_signed_area(np.array(poly))) if len(poly) >= 3 else 0.0
-
-
-def _signed_area(poly: Float64Array) -> float:
-    """A polygon's area, positive when its corners run anticlockwise (shoelace)."""
-    x, y = poly[:, 0], poly[:, 1]
-    return 0.5 * float(x @ np.roll(y, -1) - y @ np.roll(x, -1))
-
-
-def read_stride(shape: tuple[int, ...], max_pixels: int | None) -> int:
-    """Every how many pixels a picture is read (1: all)."""
-    if max_pixels is None or shape[0] * shape[1] <= max_pixels:
-        return 1
-    return math.ceil(math.sqrt(shape[0] * shape[1] / max_pixels))
+def _bases(tops: Tops, is_box: BoolArray) -> tuple[Float64Array, npt.NDArray[np.intp]]:
+    """The level each top stands on: the highest lower top whose rectangle holds its middle
+    (a box on a box, a carton on a pallet), else the support (0). Also which top that is (-1:
+    the support)."""
+    n = len(tops)
+    d = tops.middle_ab[:, None, :] - tops.middle_ab[None, :, :]  # (k top, j lower)
+    along = np.abs(d[..., 0] * tops.axis_ab[None, :, 0] + d[..., 1] * tops.axis_ab[None, :, 1])
+    across = np.abs(d[..., 1] * tops.axis_ab[None, :, 0] - d[..., 0] * tops.axis_ab[None, :, 1])
+    under = (
+        (along <= 0.5 * tops.length_m[None, :])
+        & (across <= 0.5 * tops.width_m[None, :])
+        & (tops.height_m[None, :] < tops.height_m[:, None] - 0.01)
+    )
+    under[np.arange(n), np.arange(n)] = False
+    levels = np.where(under, tops.height_m[None, :], -np.inf)
+    on = np.argmax(levels, axis=1)
+    has = np.isfinite(levels[np.arange(n), on])
+    base = np.where(has, tops.height_m[on], 0.0)
+    return base, np.where(has, on, -1)
 
 
 def _report(
-    boxes: list[Plateau],
+    tops: Tops,
+    round_: Round,
+    is_box: BoolArray,
+    base_m: Float64Array,
+    on: npt.NDArray[np.intp],
     support: Support,
-    basis: Float64Array,
     camera_to_world: Float64Array | None,
     settings: FinderSettings,
 ) -> list[Box]:
-    cam_basis = tops.plane_basis(support, None)
-    n_c = cam_basis[2]
+    e1, e2, n_c = tops.basis
     rotation = camera_to_world[:3, :3] if camera_to_world is not None else np.eye(3)
     shift = camera_to_world[:3, 3] if camera_to_world is not None else np.zeros(3)
-    ordered = sorted(boxes, key=lambda b: -b.height_m)
-    index = {b.label: i for i, b in enumerate(ordered)}
+    order = [int(k) for k in np.argsort(-tops.height_m) if is_box[k]]
+    index = {k: i for i, k in enumerate(order)}
+    flatness = np.clip(1.0 - tops.rms_m / np.maximum(FLAT_SIGMAS * tops.sigma_m, FLAT_M), 0, 1)
     result: list[Box] = []
-    for b in ordered:
-        assert b.rect is not None
-        rect = b.rect
-        top_c = (
-            rect.middle[0] * cam_basis[0]
-            + rect.middle[1] * cam_basis[1]
-            + (b.height_m - support.offset_camera_m) * n_c
-        )
-        height = b.height_m - b.base_m
+    for k in order:
+        middle = tops.middle_ab[k]
+        top_c = middle[0] * e1 + middle[1] * e2 + (tops.height_m[k] - support.offset_camera_m) * n_c
+        height = float(tops.height_m[k] - base_m[k])
         centre_c = top_c - 0.5 * height * n_c
-        length_c = rect.axis[0] * cam_basis[0] + rect.axis[1] * cam_basis[1]
+        length_c = tops.axis_ab[k, 0] * e1 + tops.axis_ab[k, 1] * e2
         x_axis = rotation @ length_c
         z_axis = rotation @ n_c
-        y_axis = tops.cross(z_axis, x_axis)
+        y_axis = np.cross(z_axis, x_axis)
         top = rotation @ top_c + shift
         centre = rotation @ centre_c + shift
         if settings.workspace is not None and not all(
             lo <= value <= hi for value, (lo, hi) in zip(top, settings.workspace, strict=True)
         ):
             continue
-        reference = basis[0]
-        yaw = math.degrees(
-            math.atan2(float(length_c @ tops.cross(n_c, reference)), float(length_c @ reference))
-        )
         if camera_to_world is not None:
             yaw = math.degrees(math.atan2(float(x_axis[1]), float(x_axis[0])))
+        else:
+            yaw = math.degrees(math.atan2(float(tops.axis_ab[k, 1]), float(tops.axis_ab[k, 0])))
         yaw = (yaw + 90.0) % 180.0 - 90.0
         if yaw == -90.0:
             yaw = 90.0
-        quaternion = _quaternion(np.stack([x_axis, y_axis, z_axis], axis=1))
+        q = quaternion(np.stack([x_axis, y_axis, z_axis], axis=1))
+        seen_base = np.abs(round_.lower_m[k] - base_m[k]) < np.maximum(4.0 * tops.sigma_m[k], 0.01)
         result.append(
             Box(
                 centre=_vec(centre),
-                quaternion_xyzw=(
-                    float(quaternion[0]),
-                    float(quaternion[1]),
-                    float(quaternion[2]),
-                    float(quaternion[3]),
-                ),
-                size=(rect.length_m, rect.width_m, height),
+                quaternion_xyzw=(float(q[0]), float(q[1]), float(q[2]), float(q[3])),
+                size=(float(tops.length_m[k]), float(tops.width_m[k]), height),
                 yaw_deg=yaw,
-                score=b.score,
-                top_pixels=b.pixels,
+                score=float(min(tops.fill[k], 1.0) * flatness[k]),
+                top_pixels=int(tops.pixels[k]),
                 top_middle=_vec(top),
-                on=index.get(b.on_plateau) if b.on_plateau is not None else None,
-                hidden_sides=rect.hidden_sides,
+                on=index.get(int(on[k])) if on[k] >= 0 else None,
+                hidden_sides=int(round_.hidden[k].sum()),
+                height_seen=bool(seen_base.any()),
             )
         )
-    if len(result) != len(ordered):
-        # The workspace dropped some: "on" must index the list as reported.
-        result = [replace(r, on=None) for r in result]
+    if len(result) != len(order):
+        result = [Box(**{**b.__dict__, "on": None}) for b in result]
     return result
 
 
-def _quaternion(m: Float64Array) -> Float64Array:
+def quaternion(m: Float64Array) -> Float64Array:
     """x, y, z, w of a rotation matrix (Shepperd's method: the largest of the four first)."""
     trace = m[0, 0] + m[1, 1] + m[2, 2]
     i = int(np.argmax([m[0, 0], m[1, 1], m[2, 2], trace]))
@@ -483,107 +393,3 @@ def _quaternion(m: Float64Array) -> Float64Array:
 
 def _vec(v: Float64Array) -> Vec3:
     return (float(v[0]), float(v[1]), float(v[2]))
-
-
-class BoxFinder:
-    """:func:`find_boxes` for a stream: keeps the support while the camera does not move and it
-    still fits (checked on the grid sample), measures how far the colour lies off the depth
-    now and then, and gives each box a stable ``id``."""
-
-    def __init__(self, settings: FinderSettings = FinderSettings()) -> None:
-        self.settings = settings
-        self._support: Support | None = None
-        self._pose: Float64Array | None = None
-        self._lens: Intrinsics | None = None
-        self._last: list[Box] = []
-        self._next_id = 0
-        self.refits = 0
-        self.registration = register.Registration(settings.colour_shift or (0, 0))
-        """The colour's shift against the depth, as last measured (or as set)."""
-        self._coloured = 0
-        """Pictures with colour read since the lens last changed."""
-
-    def __call__(
-        self,
-        depth_m: npt.NDArray[np.floating],
-        lens: Intrinsics,
-        camera_to_world: Float64Array | None,
-        colour: npt.NDArray[np.uint8] | None = None,
-    ) -> Found:
-        depth = np.asarray(depth_m, dtype=np.float32)
-        same_pose = (self._pose is None and camera_to_world is None) or (
-            self._pose is not None
-            and camera_to_world is not None
-            and np.allclose(self._pose, camera_to_world, atol=1e-6)
-        )
-        support = self._support
-        if lens != self._lens:
-            self._coloured = 0
-        if (
-            support is None
-            or not same_pose
-            or lens != self._lens
-            or not support_holds(depth, lens, support)
-        ):
-            support = fit_support(
-                depth,
-                lens,
-                camera_to_world,
-                max_tilt_deg=self.settings.max_tilt_deg,
-                noise_sigma_m=self.settings.noise_sigma_m,
-                table_z_m=self.settings.table_z_m,
-            )
-            self.refits += 1
-        self._support, self._lens = support, lens
-        self._pose = None if camera_to_world is None else np.array(camera_to_world, copy=True)
-        if support is None:
-            self._last = []
-            return Found(None, [], "world" if camera_to_world is not None else "camera")
-        if colour is not None and self.settings.colour_shift is None:
-            self._register(depth, colour, support)
-        found = find_boxes(
-            depth,
-            lens,
-            camera_to_world,
-            colour,
-            self.settings,
-            support,
-            self.registration.shift,
-        )
-        boxes = self._identify(found.boxes)
-        return Found(found.support, boxes, found.frame)
-
-    def _register(
-        self, depth: Float32Array, colour: npt.NDArray[np.uint8], support: Support
-    ) -> None:
-        """Measure the colour's shift on the first picture and every ``register_every`` after;
-        a later measurement replaces the shift kept only if it is sure."""
-        if self._coloured % max(self.settings.register_every, 1) == 0:
-            measured = register.colour_offset(depth, colour, support.sigma_m)
-            if measured.sure or self._coloured == 0:
-                self.registration = measured
-        self._coloured += 1
-
-    def _identify(self, boxes: list[Box]) -> list[Box]:
-        taken: set[int] = set()
-        result = []
-        for box in boxes:
-            best, best_distance = None, self.settings.match_distance_m
-            for old in self._last:
-                if old.id in taken:
-                    continue
-                distance = math.dist(old.centre, box.centre)
-                similar = all(
-                    abs(a - b) < max(0.02, 0.2 * b) for a, b in zip(old.size, box.size, strict=True)
-                )
-                if similar and distance <= best_distance:
-                    best, best_distance = old, distance
-            if best is None:
-                ident = self._next_id
-                self._next_id += 1
-            else:
-                ident = best.id
-            taken.add(ident)
-            result.append(replace(box, id=ident))
-        self._last = result
-        return result

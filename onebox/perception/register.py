@@ -36,10 +36,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 import numpy.typing as npt
-
-from onebox.perception import segment
 
 __all__ = ["Registration", "colour_offset", "in_register"]
 
@@ -88,7 +87,7 @@ def colour_offset(
     """The best whole-pixel shift of ``colour`` against ``depth_m`` (see the module docstring);
     ``shift`` is (0, 0) unless the pictures are sure of another."""
     depth = np.asarray(depth_m, dtype=np.float32)
-    grey = segment.grey(colour)
+    grey = cv2.cvtColor(np.ascontiguousarray(colour), cv2.COLOR_RGB2GRAY).astype(np.int16)
     # Brightness steps are gathered one shift further than tried, for the smoothing below.
     margin = REACH_PX + 1
     reach = np.arange(-margin, margin + 1)

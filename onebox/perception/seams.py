@@ -6,8 +6,8 @@ dark line (the shadow between the two lids) or as an edge (two different prints 
 labels and tape show lines and edges too, but those stop inside the top; a seam runs straight
 from one side of the region to the other, parallel to a side (packed cartons are aligned).
 
-Contract: :func:`seam_map` marks the pixels of thin dark lines and strong colour edges, with
-tolerances from the picture's own noise; :func:`split_at_seams` cuts every top that such a
+Contract: :func:`seam_map` marks the pixels of thin dark lines, with a tolerance from the
+picture's own noise; :func:`split_at_seams` cuts every top that such a
 line crosses from side to side (``SEAM_SHARE`` of the cross-section's pixels, clearly more
 than the top's print elsewhere) into two, returning the new labels or None when nothing is
 cut. Whole-array work: every top's cross-sections are counted at once (``np.bincount``).
@@ -30,18 +30,22 @@ BoolArray = npt.NDArray[np.bool_]
 IntArray = npt.NDArray[np.int32]
 Float64Array = npt.NDArray[np.float64]
 
-SEAM_WIDTH_M = 0.012
+SEAM_WIDTH_M = 0.006
 """The widest gap between two touching cartons that reads as a thin line (wider is a gap the
 depth sees)."""
-DARK_STEP = 10.0
+DARK_STEP = 25.0
 """A line this many grey levels darker than both sides is dark; never less than 4 x the
 picture's own noise."""
-EDGE_STEP = 16.0
-"""A grey-level change per pixel this large is an edge; never less than 6 x the noise."""
-SEAM_SHARE = 0.6
+SEAM_SHARE = 0.8
 """A seam crosses this share of a top's cross-section..."""
 SEAM_OVER_PRINT = 0.35
 """...and this much more than the top's cross-sections do on average (print, texture)."""
+MIN_SEAM_M = 0.1
+"""A seam is at least this long (the side two cartons share): a printed line across a narrow
+top is not one."""
+END_SHARE = 0.5
+"""A seam reaches the top's outline at both ends (this share of its last sixth on each side):
+printed lines stop at a margin."""
 MIN_PART_M = 0.04
 """A seam leaves at least this much of the top either side: the narrowest carton."""
 
@@ -49,21 +53,18 @@ MIN_PART_M = 0.04
 def seam_map(
     colour: npt.NDArray[np.uint8], depth_m: npt.NDArray[np.float32], lens: Intrinsics
 ) -> BoolArray:
-    """Pixels on thin dark lines or strong colour edges (dilated a pixel, so a line is solid)."""
+    """Pixels on thin dark lines (dilated a pixel, so a line is solid)."""
     grey = cv2.cvtColor(np.ascontiguousarray(colour), cv2.COLOR_RGB2GRAY)
     sample = depth_m[:: max(1, depth_m.shape[0] // 32), :: max(1, depth_m.shape[1] // 32)]
     finite = sample[np.isfinite(sample)]
     distance = float(np.median(finite)) if finite.size else 1.0
-    size = int(np.clip(round(SEAM_WIDTH_M * lens.fx / max(distance, 0.1)), 3, 15)) | 1
+    size = int(np.clip(round(SEAM_WIDTH_M * lens.fx / max(distance, 0.1)), 3, 9)) | 1
     kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (size, size))
     dark = cv2.morphologyEx(grey, cv2.MORPH_BLACKHAT, kernel)
     # The picture's own noise: the median absolute Laplacian (mostly flat regions).
     laplacian = cv2.Laplacian(grey, cv2.CV_16S)
     noise = float(np.median(np.abs(laplacian[::2, ::2]))) / 4.0
-    gx = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3)
-    gy = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3)
-    edge = (gx * gx + gy * gy) > (8.0 * max(EDGE_STEP, 6.0 * noise)) ** 2
-    seam = (dark > max(DARK_STEP, 4.0 * noise)) | edge
+    seam = dark > max(DARK_STEP, 4.0 * noise)
     result: BoolArray = cv2.dilate(seam.astype(np.uint8), None).astype(bool)
     return result
 
@@ -95,9 +96,9 @@ def split_at_seams(
     cut_along = np.full(n, False)
     cut_at = np.zeros(n)
     best = np.zeros(n)
-    for is_along, coordinate, extent in (
-        (True, along, tops.length_m),
-        (False, across, tops.width_m),
+    for is_along, coordinate, extent, other, span in (
+        (True, along, tops.length_m, across, tops.width_m),
+        (False, across, tops.width_m, along, tops.length_m),
     ):
         nbins = np.maximum(np.ceil(extent / step).astype(np.int64) + 2, 1)
         offset = np.concatenate([[0], np.cumsum(nbins)[:-1]])
@@ -110,13 +111,27 @@ def split_at_seams(
         total = np.bincount(slot, minlength=int(nbins.sum()))
         lined = np.bincount(slot, weights=on_seam, minlength=int(nbins.sum()))
         share = lined / np.maximum(total, 1)
+        ends = []
+        for sign in (1.0, -1.0):
+            end = sign * other > span[top] / 3.0
+            ends.append(
+                np.bincount(slot, weights=on_seam * end, minlength=int(nbins.sum()))
+                / np.maximum(np.bincount(slot, weights=end, minlength=int(nbins.sum())), 1)
+            )
         print_share = np.bincount(top, weights=on_seam, minlength=n) / np.maximum(tops.pixels, 1)
         owner = np.repeat(np.arange(n), nbins)
         position = (np.arange(int(nbins.sum())) - offset[owner] - 0.5) * step[owner]
         position -= 0.5 * extent[owner]
         margin = np.maximum(MIN_PART_M, 3.0 * step[owner])
         inside = (np.abs(position) < 0.5 * extent[owner] - margin) & (total >= 3)
-        strong = inside & (share >= SEAM_SHARE) & (share - print_share[owner] >= SEAM_OVER_PRINT)
+        strong = (
+            inside
+            & (span[owner] >= MIN_SEAM_M)
+            & (share >= SEAM_SHARE)
+            & (share - print_share[owner] >= SEAM_OVER_PRINT)
+            & (ends[0] >= END_SHARE)
+            & (ends[1] >= END_SHARE)
+        )
         score = np.where(strong, share, 0.0)
         peak = np.maximum.reduceat(score, offset)
         where = np.zeros(n, dtype=np.int64)
