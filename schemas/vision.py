@@ -21,10 +21,19 @@ class BoundingBox3D(Message, frozen=True, kw_only=True):
 
 
 class Detection3D(Message, frozen=True, kw_only=True):
+    """One object: what it is (``results``: "box", and the catalogue entry it fits when a
+    catalogue is used), where it is and how large (``bbox``), its id in the stream."""
+
     header: Header = Header()
     results: list[ObjectHypothesis] = []
     bbox: BoundingBox3D = BoundingBox3D()
     id: str = ""
+    hidden_sides: int = 0
+    """How many sides of its top something nearer hides: its size along them is a lower
+    bound (0 to 4)."""
+    height_seen: bool = True
+    """False when the level it stands on is not seen beside it (a carton in a full layer): the
+    height is then measured to the level its neighbours stand on, or is the catalogue's."""
 
 
 class Detection3DArray(Message, frozen=True, kw_only=True):

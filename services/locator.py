@@ -45,6 +45,7 @@ import logging
 import math
 import threading
 import time
+from pathlib import Path
 from dataclasses import dataclass
 from typing import Any
 
@@ -57,6 +58,7 @@ from onebox.errors import SettingError
 from onebox.geometry import FrameError, FrameTree, matrix_of
 from onebox.perception import register, seed
 from onebox.perception.boxes import MAX_PIXELS, Box, FinderSettings, Found
+from onebox.perception.catalogue import Entry, read_catalogue
 from onebox.perception.stream import BoxFinder
 from onebox.rectify import Rectifier, lens_of
 from onebox.sync import StampClock, Stamped, StampMatcher
@@ -190,6 +192,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_false",
         help="measure from depth alone, even when a colour picture comes",
     )
+    group.add_argument(
+        "--catalogue",
+        type=Path,
+        metavar="FILE.toml",
+        help="the box sizes the site handles ([[box]] tables: name, length, width, height in "
+        "metres): a top that fits one takes its height, and its name as a second class",
+    )
     match = parser.add_argument_group("matching")
     match.add_argument(
         "--slop-ms",
@@ -242,6 +251,7 @@ class LocatorSettings:
     colour_shift: tuple[int, int] | None = None
     method: str = "boxes"
     use_colour: bool = True
+    catalogue: tuple[Entry, ...] = ()
     slop_ns: int = 0
     pose_source: str = "tf"
     queue_size: int = 4
@@ -289,6 +299,7 @@ class LocatorSettings:
             colour_shift=shift,
             method=args.method,
             use_colour=args.colour,
+            catalogue=() if args.catalogue is None else read_catalogue(args.catalogue),
             slop_ns=round(args.slop_ms * 1e6),
             pose_source=args.pose_source,
             queue_size=args.queue_size,
@@ -306,6 +317,7 @@ class LocatorSettings:
             max_height_m=self.max_height_m,
             max_pixels=self.max_pixels or None,
             colour_shift=self.colour_shift,
+            catalogue=self.catalogue,
         )
 
 
@@ -396,7 +408,8 @@ def detection_array(found: Found, stamp_ns: int, frame_id: str) -> Detection3DAr
     detections = [
         Detection3D(
             header=header,
-            results=[ObjectHypothesis(class_id="box", score=float(box.score))],
+            results=[ObjectHypothesis(class_id="box", score=float(box.score))]
+            + ([ObjectHypothesis(class_id=box.name, score=float(box.score))] if box.name else []),
             bbox=BoundingBox3D(
                 center=Pose(
                     position=_vector(box.centre), orientation=_quaternion(box.quaternion_xyzw)
@@ -404,6 +417,8 @@ def detection_array(found: Found, stamp_ns: int, frame_id: str) -> Detection3DAr
                 size=_vector(box.size),
             ),
             id=str(box.id),
+            hidden_sides=box.hidden_sides,
+            height_seen=box.height_seen,
         )
         for box in found.boxes
     ]

@@ -35,6 +35,7 @@ import numpy.typing as npt
 
 from onebox.geometry import Intrinsics
 from onebox.perception import register
+from onebox.perception.catalogue import Entry, match
 from onebox.perception.support import Support, fit_support
 from onebox.perception.surface import read_surface
 from onebox.perception.tops import Tops, find_tops
@@ -51,10 +52,12 @@ PROBES_PER_SIDE = 9
 """Points looked at just past each side of a top."""
 PROBE_REACH_M = 0.012
 """...this far past it (and at least two pixels): past a smeared edge, within a gap."""
+CANDIDATES = 4
+"""Lower levels looked for round a top (the highest first), beside the support."""
 HIDDEN_SHARE = 0.3
 """A side is hidden when this share of its probes see something nearer than the top."""
-HIDDEN_FILL = 0.6
-"""A top with a hidden side must fill this much of the rectangle seen (a whole one: min_score)."""
+COVER_GRID = 9
+"""Points across each side of a top's rectangle looked at for what hides it."""
 CORNER_FILL = 0.7
 """A box's top reaches into its rectangle's corners; a disc, a rounded tin or a bowl's bottom
 does not."""
@@ -99,6 +102,9 @@ class FinderSettings:
     :mod:`onebox.perception.register`); None measures it from the pictures."""
     register_every: int = 30
     """BoxFinder: measure the colour's shift on the first picture and every this many after."""
+    catalogue: tuple[Entry, ...] = ()
+    """The box sizes a site handles (:mod:`onebox.perception.catalogue`): a top that fits one
+    takes its height and name."""
 
 
 @dataclass(frozen=True)
@@ -196,7 +202,7 @@ def find_boxes(
         return Found(support, [], frame)
     round_ = _look_round(tops, depth, lens, support)
     is_box = _boxes(tops, round_, settings)
-    base, on = _bases(tops, is_box)
+    base, on = _bases(tops, round_, depth, lens, support)
     return Found(
         support, _report(tops, round_, is_box, base, on, support, camera_to_world, settings), frame
     )
@@ -216,6 +222,14 @@ class Round:
     sloping: BoolArray
     """Past the side the surface goes on down at no level: a side face seen at a slant, or a
     round or ragged body."""
+    seen_top: npt.NDArray[np.intp]
+    """(n, 4, PROBES_PER_SIDE): the top seen at each probe's pixel (-1: none)."""
+    ab: Float64Array
+    """(n, 4, PROBES_PER_SIDE, 2): where the probes are, in the support plane's coordinates."""
+    covered: Float64Array
+    """(n,): the share of the top's rectangle something nearer hides."""
+    corners_covered: Float64Array
+    """(n,): the share of its four corners something nearer hides."""
 
 
 def _look_round(tops: Tops, depth_m: Float32Array, lens: Intrinsics, support: Support) -> Round:
@@ -240,16 +254,9 @@ def _look_round(tops: Tops, depth_m: Float32Array, lens: Intrinsics, support: Su
         + outward[:, :, None, :] * out_len[:, :, None, None]
         + along[:, :, None, :] * (along_len[:, :, None, None] * spread[None, None, :, None])
     )  # (n, 4, P, 2)
-    lift = (tops.height_m - support.offset_camera_m)[:, None, None, None]
-    point = ab[..., :1] * e1 + ab[..., 1:] * e2 + lift * normal  # (n, 4, P, 3)
-    z_expected = point[..., 2]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        u = np.rint(lens.fx * point[..., 0] / z_expected + lens.cx)
-        v = np.rint(lens.fy * point[..., 1] / z_expected + lens.cy)
-    inside = (u >= 0) & (u < cols) & (v >= 0) & (v < rows) & (z_expected > 0)
-    ui = np.where(inside, u, 0).astype(np.intp)
-    vi = np.where(inside, v, 0).astype(np.intp)
-    seen = np.where(inside, depth_m[vi, ui], np.nan).astype(np.float64)
+    z_expected, seen, inside, (vi, ui) = _sight(
+        ab, tops.height_m[:, None, None], tops.basis, depth_m, lens, support
+    )
     tolerance = np.maximum(3.0 * tops.sigma_m, 0.006)[:, None, None]
     with np.errstate(invalid="ignore"):
         nearer = seen < z_expected - tolerance * 4.0
@@ -258,18 +265,73 @@ def _look_round(tops: Tops, depth_m: Float32Array, lens: Intrinsics, support: Su
         lower = np.where(seen > z_expected + tolerance, seen_height, np.nan)
     hidden = nearer.mean(axis=2) >= HIDDEN_SHARE
     cut_off = (~inside).mean(axis=2) >= HIDDEN_SHARE
+    covered, corners_covered = _covered(tops, depth_m, lens, support)
     # A lower surface at no level (neither the support nor any top) is the object going on
     # down past its top: a box's own side face seen at a slant, or a curved or ragged body.
     levels = np.concatenate([[0.0], tops.height_m])
     off_level = np.min(np.abs(lower[..., None] - levels), axis=-1) > 2.0 * tolerance
     sloping = (off_level & np.isfinite(lower)).mean(axis=2) >= 0.5
-    return Round(hidden, lower, cut_off, sloping)
+    seen_top = np.where(inside, tops.labels[vi, ui] - 1, -1)
+    return Round(hidden, lower, cut_off, sloping, seen_top, ab, covered, corners_covered)
+
+
+def _covered(
+    tops: Tops, depth_m: Float32Array, lens: Intrinsics, support: Support
+) -> tuple[Float64Array, Float64Array]:
+    """How much of each top's rectangle, and of its four corners, something nearer hides (a
+    box standing on it, an object in front): a grid of points on the rectangle, looked at."""
+    n = len(tops)
+    grid = np.linspace(-0.45, 0.45, COVER_GRID)
+    s, t = np.meshgrid(grid, grid, indexing="ij")
+    s, t = s.ravel(), t.ravel()
+    axis = tops.axis_ab
+    perp = np.stack([-axis[:, 1], axis[:, 0]], axis=1)
+    ab = (
+        tops.middle_ab[:, None, :]
+        + (s[None, :, None] * tops.length_m[:, None, None]) * axis[:, None, :]
+        + (t[None, :, None] * tops.width_m[:, None, None]) * perp[:, None, :]
+    )
+    z_expected, seen, _, _ = _sight(
+        ab, tops.height_m[:, None], tops.basis, depth_m, lens, support
+    )
+    tolerance = np.maximum(3.0 * tops.sigma_m, 0.006)[:, None]
+    with np.errstate(invalid="ignore"):
+        nearer = seen < z_expected - 4.0 * tolerance
+    corner = (np.abs(s) == grid[-1]) & (np.abs(t) == grid[-1])
+    return nearer.mean(axis=1), nearer[:, corner].mean(axis=1)
+
+
+def _sight(
+    ab: Float64Array,
+    height_m: Float64Array,
+    basis: Float64Array,
+    depth_m: Float32Array,
+    lens: Intrinsics,
+    support: Support,
+) -> tuple[Float64Array, Float64Array, BoolArray, tuple[npt.NDArray[np.intp], ...]]:
+    """Points at (a, b) in the support plane's coordinates and ``height_m`` above it: the
+    depth each would read if seen, the depth seen at its pixel (NaN outside the picture or no
+    reading), whether it is in the picture, and its pixel (row, column)."""
+    rows, cols = depth_m.shape
+    e1, e2, normal = basis
+    lift = (height_m - support.offset_camera_m)[..., None]
+    point = ab[..., :1] * e1 + ab[..., 1:] * e2 + lift * normal
+    z_expected = point[..., 2]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = np.rint(lens.fx * point[..., 0] / z_expected + lens.cx)
+        v = np.rint(lens.fy * point[..., 1] / z_expected + lens.cy)
+    inside = (u >= 0) & (u < cols) & (v >= 0) & (v < rows) & (z_expected > 0)
+    ui = np.where(inside, u, 0).astype(np.intp)
+    vi = np.where(inside, v, 0).astype(np.intp)
+    seen = np.where(inside, depth_m[vi, ui], np.nan).astype(np.float64)
+    return z_expected, seen, inside, (vi, ui)
 
 
 def _boxes(tops: Tops, round_: Round, settings: FinderSettings) -> BoolArray:
     """Which tops are boxes' (see the module docstring)."""
-    hidden = round_.hidden.any(axis=1)
-    fill_needed = np.where(hidden, HIDDEN_FILL, settings.min_score)
+    # What something nearer hides cannot be filled: ask for the rest.
+    fill_needed = settings.min_score * (1.0 - round_.covered)
+    corners_needed = CORNER_FILL * (1.0 - round_.corners_covered)
     flat = tops.rms_m <= np.maximum(FLAT_SIGMAS * tops.sigma_m, FLAT_M)
     result: BoolArray = (
         (tops.area_m2 >= settings.min_top_area_m2)
@@ -277,7 +339,7 @@ def _boxes(tops: Tops, round_: Round, settings: FinderSettings) -> BoolArray:
         & (tops.tilt_deg <= settings.max_top_tilt_deg)
         & flat
         & (tops.fill >= fill_needed)
-        & (tops.corners >= CORNER_FILL)
+        & (tops.corners >= corners_needed)
         & (round_.sloping.sum(axis=1) <= 2)
     )
     if not settings.keep_cut_off:
@@ -285,25 +347,54 @@ def _boxes(tops: Tops, round_: Round, settings: FinderSettings) -> BoolArray:
     return result
 
 
-def _bases(tops: Tops, is_box: BoolArray) -> tuple[Float64Array, npt.NDArray[np.intp]]:
-    """The level each top stands on: the highest lower top whose rectangle holds its middle
-    (a box on a box, a carton on a pallet), else the support (0). Also which top that is (-1:
-    the support)."""
+def _bases(
+    tops: Tops,
+    round_: Round,
+    depth_m: Float32Array,
+    lens: Intrinsics,
+    support: Support,
+) -> tuple[Float64Array, npt.NDArray[np.intp]]:
+    """The level each top stands on, and which top that is (-1: the support).
+
+    The candidates are the support and the lower tops seen round the top, near it, or whose
+    rectangle holds its middle (a lower top seen only in a gap). Each is looked for at its own height
+    just past the top's sides: a box stands on the level found there on the most probes (a box
+    on a wider box finds it all round; a box beside a lower one finds it on one side only, and
+    its own base level on the others). Ties go to the higher level."""
     n = len(tops)
-    d = tops.middle_ab[:, None, :] - tops.middle_ab[None, :, :]  # (k top, j lower)
+    lower = tops.height_m[None, :] < tops.height_m[:, None] - 0.01  # (k top, j lower)
+    seen = round_.seen_top.reshape(n, -1)
+    counts = np.zeros((n, n + 1), dtype=np.int64)
+    np.add.at(counts, (np.repeat(np.arange(n), seen.shape[1]), seen.ravel() + 1), 1)
+    d = tops.middle_ab[:, None, :] - tops.middle_ab[None, :, :]
     along = np.abs(d[..., 0] * tops.axis_ab[None, :, 0] + d[..., 1] * tops.axis_ab[None, :, 1])
     across = np.abs(d[..., 1] * tops.axis_ab[None, :, 0] - d[..., 0] * tops.axis_ab[None, :, 1])
-    under = (
-        (along <= 0.5 * tops.length_m[None, :])
-        & (across <= 0.5 * tops.width_m[None, :])
-        & (tops.height_m[None, :] < tops.height_m[:, None] - 0.01)
+    holds = (along <= 0.5 * tops.length_m[None, :]) & (across <= 0.5 * tops.width_m[None, :])
+    reach = 0.5 * np.hypot(tops.length_m, tops.width_m) + PROBE_REACH_M
+    near = np.hypot(d[..., 0], d[..., 1]) < reach[:, None] + reach[None, :]
+    candidate = lower & ((counts[:, 1:] > 0) | holds | near)
+    candidate[np.arange(n), np.arange(n)] = False
+    # The few highest candidates of each top, then the support.
+    width = min(CANDIDATES, n)
+    ranked = np.argsort(np.where(candidate, -tops.height_m[None, :], np.inf), axis=1)[:, :width]
+    real = np.take_along_axis(candidate, ranked, axis=1)
+    levels = np.concatenate(
+        [np.where(real, tops.height_m[ranked], np.nan), np.zeros((n, 1))], axis=1
+    )  # (n, C + 1)
+    ab = round_.ab[:, None]  # (n, 1, 4, P, 2)
+    z_expected, seen_z, _, _ = _sight(
+        ab, levels[:, :, None, None], tops.basis, depth_m, lens, support
     )
-    under[np.arange(n), np.arange(n)] = False
-    levels = np.where(under, tops.height_m[None, :], -np.inf)
-    on = np.argmax(levels, axis=1)
-    has = np.isfinite(levels[np.arange(n), on])
-    base = np.where(has, tops.height_m[on], 0.0)
-    return base, np.where(has, on, -1)
+    tolerance = np.maximum(3.0 * tops.sigma_m, 0.006)[:, None, None, None]
+    with np.errstate(invalid="ignore"):
+        found = np.abs(seen_z - z_expected) < tolerance
+    score = found.reshape(n, width + 1, -1).sum(axis=2).astype(np.float64)
+    score[np.isnan(levels)] = -1.0
+    score += 1e-3 * np.nan_to_num(levels, nan=0.0)  # ties: the higher
+    best = np.argmax(score, axis=1)
+    base = levels[np.arange(n), best]
+    on = np.where(best < width, ranked[np.arange(n), np.minimum(best, width - 1)], -1)
+    return np.nan_to_num(base, nan=0.0), on
 
 
 def _report(
@@ -327,6 +418,17 @@ def _report(
         middle = tops.middle_ab[k]
         top_c = middle[0] * e1 + middle[1] * e2 + (tops.height_m[k] - support.offset_camera_m) * n_c
         height = float(tops.height_m[k] - base_m[k])
+        hidden = round_.hidden[k]
+        entry = match(
+            float(tops.length_m[k]),
+            float(tops.width_m[k]),
+            height,
+            settings.catalogue,
+            hidden_length=bool(hidden[0] or hidden[1]),
+            hidden_width=bool(hidden[2] or hidden[3]),
+        )
+        if entry is not None:
+            height = entry.height_m
         centre_c = top_c - 0.5 * height * n_c
         length_c = tops.axis_ab[k, 0] * e1 + tops.axis_ab[k, 1] * e2
         x_axis = rotation @ length_c
@@ -357,8 +459,9 @@ def _report(
                 top_pixels=int(tops.pixels[k]),
                 top_middle=_vec(top),
                 on=index.get(int(on[k])) if on[k] >= 0 else None,
-                hidden_sides=int(round_.hidden[k].sum()),
+                hidden_sides=int(hidden.sum()),
                 height_seen=bool(seen_base.any()),
+                name="" if entry is None else entry.name,
             )
         )
     if len(result) != len(order):

@@ -51,6 +51,8 @@ PROFILE_SHARE = 0.25
 cross-sections) is a stray (a spur, a smear), not the top's extent."""
 MIN_PIXELS = 12
 """Fewer pixels than this are no top (speckles), whatever their footprint."""
+JOIN_SAMPLES = 24
+"""Points looked at between two pieces of a top that something nearer may have cut apart."""
 SEAM_ROUNDS = 3
 """Splitting at seams and measuring again, at most this often (a seam that crosses one part
 only shows once the other is split off)."""
@@ -162,6 +164,9 @@ def find_tops(
     seam = None if colour is None else seams.seam_map(colour, depth_m, lens)
     basis = plane_basis(support)
     tops = _measure(labels, depth_m, surface, lens, basis)
+    joined = join_hidden(tops, depth_m, lens, support)
+    if joined is not None:
+        tops = _measure(joined, depth_m, surface, lens, basis)
     if seam is None:
         return tops
     for _ in range(SEAM_ROUNDS):
@@ -170,6 +175,63 @@ def find_tops(
             break
         tops = _measure(split, depth_m, surface, lens, basis)
     return tops
+
+
+def join_hidden(
+    tops: Tops, depth_m: Float32Array, lens: Intrinsics, support: Support
+) -> IntArray | None:
+    """New labels with the pieces of one top that something nearer cuts apart made one (a
+    carton seen either side of a box standing on it, a lid behind a bottle), or None.
+
+    Two pieces are one top when they lie at one height and everything seen on the line between
+    their middles, at that height, is one of them or something nearer hiding it (at least one
+    point of it: pieces that meet without anything in front were cut apart for a reason)."""
+    n = len(tops)
+    if n < 2:
+        return None
+    tolerance = np.maximum(3.0 * tops.sigma_m, 0.003)
+    i, j = np.triu_indices(n, 1)
+    level = np.abs(tops.height_m[i] - tops.height_m[j]) < np.maximum(tolerance[i], tolerance[j])
+    i, j = i[level], j[level]
+    if i.size == 0:
+        return None
+    rows, cols = depth_m.shape
+    share = np.linspace(0.0, 1.0, JOIN_SAMPLES)
+    ab = tops.middle_ab[i, None, :] + share[None, :, None] * (
+        tops.middle_ab[j, None, :] - tops.middle_ab[i, None, :]
+    )
+    height = 0.5 * (tops.height_m[i] + tops.height_m[j])
+    e1, e2, normal = tops.basis
+    point = ab[..., :1] * e1 + ab[..., 1:] * e2 + (height - support.offset_camera_m)[:, None, None] * normal
+    z = point[..., 2]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = np.rint(lens.fx * point[..., 0] / z + lens.cx)
+        v = np.rint(lens.fy * point[..., 1] / z + lens.cy)
+    inside = (u >= 0) & (u < cols) & (v >= 0) & (v < rows) & (z > 0)
+    ui = np.where(inside, u, 0).astype(np.intp)
+    vi = np.where(inside, v, 0).astype(np.intp)
+    label = tops.labels[vi, ui] - 1
+    seen = depth_m[vi, ui]
+    with np.errstate(invalid="ignore"):
+        nearer = seen < z - 4.0 * np.maximum(tolerance[i], tolerance[j])[:, None]
+    own = (label == i[:, None]) | (label == j[:, None])
+    one = inside.all(axis=1) & (own | nearer).all(axis=1) & nearer.any(axis=1)
+    if not one.any():
+        return None
+    # Union the joined pairs (a few: a short loop over pairs, not pixels).
+    parent = np.arange(n)
+    for a, b in zip(i[one], j[one], strict=True):
+        ra, rb = a, b
+        while parent[ra] != ra:
+            ra = parent[ra]
+        while parent[rb] != rb:
+            rb = parent[rb]
+        parent[max(ra, rb)] = min(ra, rb)
+    while (parent[parent] != parent).any():
+        parent = parent[parent]
+    lookup = np.concatenate([[0], parent + 1]).astype(np.int32)
+    result: IntArray = lookup[tops.labels]
+    return result
 
 
 @dataclass(frozen=True)
@@ -280,14 +342,14 @@ def _measure(
     slope_p = np.hypot(1.0, alpha * cos + beta * sin)
     slope_q = np.hypot(1.0, beta * cos - alpha * sin)
     # How full the rectangle's corners are: a box's top reaches them, a disc's or a rounded
-    # tin's does not. Corner squares a fifth of the width on a side.
-    corner = np.maximum(0.2 * np.minimum(extent_p, extent_q), 2.0 * step)
-    in_corner = (np.abs(p - mid_p[top]) > 0.5 * extent_p[top] - corner[top]) & (
-        np.abs(q - mid_q[top]) > 0.5 * extent_q[top] - corner[top]
-    )
-    corners = np.bincount(top, weights=footprint * (in_corner & keep), minlength=n) / (
-        4.0 * corner**2
-    )
+    # tin's does not. Corner squares a fifth of the width on a side (three pixels at least),
+    # a pixel in from the rectangle's sides (which the pixels' middles do not reach).
+    corner = np.maximum(0.2 * np.minimum(extent_p, extent_q), 3.0 * step)
+    dp = 0.5 * extent_p[top] - step[top] - np.abs(p - mid_p[top])
+    dq = 0.5 * extent_q[top] - step[top] - np.abs(q - mid_q[top])
+    in_corner = (dp >= 0) & (dp < corner[top]) & (dq >= 0) & (dq < corner[top])
+    corners = np.bincount(top, weights=footprint * (in_corner & keep), minlength=n) * 1.0
+    corners /= 4.0 * corner**2
     extent_p = extent_p * slope_p
     extent_q = extent_q * slope_q
     length = np.maximum(extent_p, extent_q)
