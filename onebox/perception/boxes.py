@@ -37,7 +37,7 @@ from onebox.geometry import Intrinsics
 from onebox.perception import register
 from onebox.perception.catalogue import Entry, match
 from onebox.perception.support import Support, fit_support
-from onebox.perception.surface import read_surface
+from onebox.perception.surface import height_slope, read_surface
 from onebox.perception.tops import Tops, find_tops
 
 Float32Array = npt.NDArray[np.float32]
@@ -52,6 +52,8 @@ PROBES_PER_SIDE = 9
 """Points looked at just past each side of a top."""
 PROBE_REACH_M = 0.012
 """...this far past it (and at least two pixels): past a smeared edge, within a gap."""
+CROP_MARGIN_PX = 16
+"""Pixels kept round everything standing, for what is looked at just past a top's sides."""
 CANDIDATES = 4
 """Lower levels looked for round a top (the highest first), beside the support."""
 HIDDEN_SHARE = 0.3
@@ -194,6 +196,9 @@ def find_boxes(
         )
     if support is None:
         return Found(None, [], frame)
+    depth, colour, lens = _standing_crop(depth, colour, lens, support, settings.min_height_m)
+    if depth.size == 0:
+        return Found(support, [], frame)
     surface = read_surface(depth, lens, support)
     tops = find_tops(
         depth, surface, lens, support, colour, settings.min_height_m, settings.max_height_m
@@ -206,6 +211,35 @@ def find_boxes(
     return Found(
         support, _report(tops, round_, is_box, base, on, support, camera_to_world, settings), frame
     )
+
+
+def _standing_crop(
+    depth_m: Float32Array,
+    colour: npt.NDArray[np.uint8] | None,
+    lens: Intrinsics,
+    support: Support,
+    min_height_m: float,
+) -> tuple[Float32Array, npt.NDArray[np.uint8] | None, Intrinsics]:
+    """The part of the picture holding everything that stands on the support, with a margin
+    (what lies round a top is looked at there too), and the lens of that part: the rest is
+    support or nothing, and reading it would only cost time."""
+    rows, cols = depth_m.shape
+    with np.errstate(invalid="ignore"):
+        standing = (
+            depth_m * height_slope(lens, cols, rows, support.normal_camera)
+            + np.float32(support.offset_camera_m)
+        ) > np.float32(min_height_m)
+    any_row = np.flatnonzero(standing.any(axis=1))
+    any_col = np.flatnonzero(standing.any(axis=0))
+    if any_row.size == 0:
+        return depth_m[:0, :0], None, lens
+    r0, r1 = max(any_row[0] - CROP_MARGIN_PX, 0), min(any_row[-1] + CROP_MARGIN_PX + 1, rows)
+    c0, c1 = max(any_col[0] - CROP_MARGIN_PX, 0), min(any_col[-1] + CROP_MARGIN_PX + 1, cols)
+    if (r0, r1, c0, c1) == (0, rows, 0, cols):
+        return depth_m, colour, lens
+    crop = np.ascontiguousarray(depth_m[r0:r1, c0:c1])
+    colour_crop = None if colour is None else np.ascontiguousarray(colour[r0:r1, c0:c1])
+    return crop, colour_crop, Intrinsics(lens.fx, lens.fy, lens.cx - c0, lens.cy - r0)
 
 
 @dataclass(frozen=True)

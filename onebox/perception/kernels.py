@@ -70,9 +70,60 @@ def extents(label: IntArray, p: Float64Array, q: Float64Array, count: int) -> Fl
     return out
 
 
+@numba.njit(cache=True, nogil=True)
+def grow(
+    labels: npt.NDArray[np.int32],
+    height: npt.NDArray[np.float32],
+    open_: npt.NDArray[np.bool_],
+    tolerance: npt.NDArray[np.float32],
+    steps: int,
+) -> None:
+    """Grow every labelled region, in place, over the open pixels next to it whose height is
+    within ``tolerance`` (the open pixel's) of the neighbour's it is reached from, at most
+    ``steps`` pixels (8-connected, breadth first)."""
+    rows, cols = labels.shape
+    frontier = np.empty(rows * cols, dtype=np.int64)
+    count = 0
+    for r in range(rows):
+        for c in range(cols):
+            if labels[r, c] == 0:
+                continue
+            edge = False
+            for rr in range(max(r - 1, 0), min(r + 2, rows)):
+                for cc in range(max(c - 1, 0), min(c + 2, cols)):
+                    if labels[rr, cc] == 0 and open_[rr, cc]:
+                        edge = True
+            if edge:
+                frontier[count] = r * cols + c
+                count += 1
+    following = np.empty(rows * cols, dtype=np.int64)
+    for _ in range(steps):
+        added = 0
+        for i in range(count):
+            r, c = divmod(frontier[i], cols)
+            label = labels[r, c]
+            h = height[r, c]
+            for rr in range(max(r - 1, 0), min(r + 2, rows)):
+                for cc in range(max(c - 1, 0), min(c + 2, cols)):
+                    if labels[rr, cc] != 0 or not open_[rr, cc]:
+                        continue
+                    if abs(height[rr, cc] - h) < tolerance[rr, cc]:
+                        labels[rr, cc] = label
+                        following[added] = rr * cols + cc
+                        added += 1
+        if added == 0:
+            break
+        frontier, following = following, frontier
+        count = added
+
+
 def warm_up() -> None:
     """Compile (or load from the cache) every kernel on a tiny input."""
     label = np.zeros(2, dtype=np.int32)
     a = np.array([0.0, 1.0])
     extents_at_angles(label, a, a, 1, np.array([0.0, 0.5]))
     extents(label, a, a, 1)
+    grid = np.zeros((2, 2), dtype=np.int32)
+    grid[0, 0] = 1
+    flat = np.zeros((2, 2), dtype=np.float32)
+    grow(grid, flat, np.ones((2, 2), dtype=np.bool_), flat + 1.0, 1)

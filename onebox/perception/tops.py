@@ -119,27 +119,13 @@ def standing_regions(surface: Surface, min_height_m: float, max_height_m: float 
     core = cv2.morphologyEx(core, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
     _, labels = cv2.connectedComponents(core, connectivity=4, ltype=cv2.CV_32S)
     # Grow the regions back over the pixels cut at steps and the edge pixels whose normal the
-    # smoothing turned, where at the region's local height.
+    # smoothing turned, where at the height of the region beside them.
     with np.errstate(invalid="ignore"):
-        standing = (height > np.maximum(min_height_m, 4.0 * surface.sigma_m)) & (
+        open_ = (height > np.maximum(min_height_m, 4.0 * surface.sigma_m)) & (
             height < (np.inf if max_height_m is None else max_height_m)
         )
-    for _ in range(surface.reach_px + 2):
-        inside = (labels > 0).astype(np.float32)
-        summed = cv2.boxFilter(
-            np.where(labels > 0, height, 0.0).astype(np.float32), -1, (3, 3), normalize=False
-        )
-        count = cv2.boxFilter(inside, -1, (3, 3), normalize=False)
-        neighbour = cv2.dilate(labels.astype(np.float32), None)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            local = summed / count
-            grow = (
-                standing
-                & (labels == 0)
-                & (neighbour > 0)
-                & (np.abs(height - local) < np.maximum(3.0 * surface.sigma_m, 0.002))
-            )
-        labels[grow] = neighbour[grow].astype(np.int32)
+    tolerance = np.maximum(3.0 * surface.sigma_m, np.float32(0.002)).astype(np.float32)
+    kernels.grow(labels, height, open_, tolerance, surface.reach_px + 2)
     return labels
 
 
@@ -324,6 +310,7 @@ def _measure(
     step = np.sqrt(mean(footprint))  # one pixel's side on the plane
 
     keep = _within_profile(top, p, step, n) & _within_profile(top, q, step, n)
+    keep |= np.bincount(top, weights=keep, minlength=n)[top] == 0  # nothing kept: keep all
     box = kernels.extents(np.where(keep, top, -1).astype(np.int32), p, q, n)
     area = np.bincount(top, weights=footprint * keep, minlength=n)
     box[:, 0] -= 0.5 * step
