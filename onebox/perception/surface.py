@@ -47,6 +47,8 @@ STEP_SIGMAS = 5.0
 """A height spread across 3 x 3 pixels beyond this many sigma(z) is a step between surfaces."""
 MIN_STEP_M = 0.004
 """...and beyond this, whatever the noise: print and renderer precision make no step."""
+LUMPY_NOISE_M = 0.001
+"""Below this noise at the support, lumps tilt a top too little to matter."""
 NORMAL_REACH_PX = 2
 """The depth's gradient is taken this many pixels either side (more when noisy, see below)."""
 
@@ -111,8 +113,9 @@ def read_surface(depth_m: Float32Array, lens: Intrinsics, support: Support) -> S
 
 def normal_reach(support: Support) -> int:
     """How many pixels either side the depth's gradient is taken: errors that come in lumps
-    tilt a flat top over the lump's width, so look wider."""
-    if support.lump_px > 1.0:
+    tilt a flat top over the lump's width, so look wider (when there is noise to speak of: a
+    wider window also blurs a narrow top's normals into its neighbours')."""
+    if support.lump_px > 1.0 and support.sigma_m > LUMPY_NOISE_M:
         return min(int(math.ceil(support.lump_px)) + 1, 6)
     return NORMAL_REACH_PX
 
