@@ -199,7 +199,7 @@ def join_hidden(
     label = tops.labels[vi, ui] - 1
     seen = depth_m[vi, ui]
     with np.errstate(invalid="ignore"):
-        nearer = seen < z - 4.0 * np.maximum(tolerance[i], tolerance[j])[:, None]
+        nearer = seen < z - np.maximum(tolerance[i], tolerance[j])[:, None]
     own = (label == i[:, None]) | (label == j[:, None])
     one = inside.all(axis=1) & (own | nearer).all(axis=1) & nearer.any(axis=1)
     if not one.any():
