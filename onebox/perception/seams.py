@@ -6,8 +6,8 @@ dark line (the shadow between the two lids) or as an edge (two different prints 
 labels and tape show lines and edges too, but those stop inside the top; a seam runs straight
 from one side of the region to the other, parallel to a side (packed cartons are aligned).
 
-Contract: :func:`seam_map` marks the pixels of thin dark lines, with a tolerance from the
-picture's own noise; :func:`split_at_seams` cuts every top that such a
+Contract: :func:`seam_map` marks the pixels of thin dark lines and strong colour edges, with
+tolerances from the picture's own noise; :func:`split_at_seams` cuts every top that such a
 line crosses from side to side (``SEAM_SHARE`` of the cross-section's pixels, clearly more
 than the top's print elsewhere) into two, returning the new labels or None when nothing is
 cut. Whole-array work: every top's cross-sections are counted at once (``np.bincount``).
@@ -36,6 +36,9 @@ depth sees)."""
 DARK_STEP = 25.0
 """A line this many grey levels darker than both sides is dark; never less than 4 x the
 picture's own noise."""
+EDGE_STEP = 30.0
+"""A grey-level step this large between neighbours is a colour edge (two prints meeting);
+never less than 6 x the picture's noise."""
 SEAM_SHARE = 0.8
 """A seam crosses this share of a top's cross-section..."""
 SEAM_OVER_PRINT = 0.35
@@ -53,7 +56,8 @@ MIN_PART_M = 0.04
 def seam_map(
     colour: npt.NDArray[np.uint8], depth_m: npt.NDArray[np.float32], lens: Intrinsics
 ) -> BoolArray:
-    """Pixels on thin dark lines (dilated a pixel, so a line is solid)."""
+    """Pixels on thin dark lines or strong colour edges (dilated a pixel, so a line is
+    solid)."""
     grey = cv2.cvtColor(np.ascontiguousarray(colour), cv2.COLOR_RGB2GRAY)
     sample = depth_m[:: max(1, depth_m.shape[0] // 32), :: max(1, depth_m.shape[1] // 32)]
     finite = sample[np.isfinite(sample)]
@@ -64,7 +68,11 @@ def seam_map(
     # The picture's own noise: the median absolute Laplacian (mostly flat regions).
     laplacian = cv2.Laplacian(grey, cv2.CV_16S)
     noise = float(np.median(np.abs(laplacian[::2, ::2]))) / 4.0
-    seam = dark > max(DARK_STEP, 4.0 * noise)
+    gx = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3)
+    gy = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3)
+    # A Sobel response is 4 x the step between neighbours.
+    edge = (gx * gx + gy * gy) > (4.0 * max(EDGE_STEP, 6.0 * noise)) ** 2
+    seam = (dark > max(DARK_STEP, 4.0 * noise)) | edge
     result: BoolArray = cv2.dilate(seam.astype(np.uint8), None).astype(bool)
     return result
 
