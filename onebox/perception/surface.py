@@ -106,7 +106,7 @@ def read_surface(depth_m: Float32Array, lens: Intrinsics, support: Support) -> S
     # The 3 x 3 spread of heights; no reading counts as neither high nor low.
     high = cv2.dilate(np.where(valid, height, -np.inf).astype(np.float32), None)
     low = cv2.erode(np.where(valid, height, np.inf).astype(np.float32), None)
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore", over="ignore"):
         step = (high - low) > np.maximum(STEP_SIGMAS * sigma, MIN_STEP_M)
     return Surface(height, sigma, up & valid, step & valid, slope, reach)
 

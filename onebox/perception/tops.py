@@ -215,7 +215,8 @@ def join_hidden(
         parent[max(ra, rb)] = min(ra, rb)
     while (parent[parent] != parent).any():
         parent = parent[parent]
-    lookup = np.concatenate([[0], parent + 1]).astype(np.int32)
+    _, compact = np.unique(parent, return_inverse=True)
+    lookup = np.concatenate([[0], compact + 1]).astype(np.int32)
     result: IntArray = lookup[tops.labels]
     return result
 
