@@ -32,6 +32,7 @@ take remote samples only), so a key that is both bridged in and out cannot loop.
 from __future__ import annotations
 
 import logging
+import struct
 import threading
 import time
 from collections import Counter
@@ -43,6 +44,7 @@ import msgspec
 import zenoh
 import zenoh.ext
 from rosbags.typesys import Stores
+from rosbags.typesys.store import Typestore
 
 from onebox import bus, keys, rmw_zenoh
 from onebox.errors import SettingError
@@ -254,6 +256,74 @@ class BridgeSettings:
     """The onebox key prefix; the node's ROS namespace is ``/`` + it."""
 
 
+class Dropped(Exception):
+    """A sample the bridge cannot carry, with why (logged with the key or topic)."""
+
+    def __init__(self, kind: str, why: str) -> None:
+        super().__init__(why)
+        self.kind = kind
+
+
+class ToRos:
+    """A onebox payload as the CDR of its ROS 2 message: what an out route does to a sample."""
+
+    def __init__(self, route: Route, store: Typestore, messages: RosMessages) -> None:
+        self.route = route
+        self._store = store
+        self._messages = messages
+        self._decoder: msgspec.msgpack.Decoder[Any] = msgspec.msgpack.Decoder(
+            VIEWS.get(route.onebox_type, route.onebox_type)
+        )
+
+    def translate(self, payload: bytes) -> memoryview:
+        """The CDR bytes (a view of the buffer the encoder wrote); Dropped for what cannot go."""
+        what = self.route.onebox_type.__name__
+        try:
+            message = self._decoder.decode(payload)
+        except (msgspec.DecodeError, msgspec.ValidationError) as e:
+            raise Dropped("decode", f"does not decode as {what}, dropped: {e}") from e
+        try:
+            converted = self._messages.convert(message)
+        except ValueError as e:
+            raise Dropped("convert", f"dropped: {e}") from e
+        if converted is None:
+            raise Dropped("empty", f"an empty {what}, which ROS 2 tools cannot use: dropped")
+        typename, ros = converted
+        try:
+            return self._store.serialize_cdr(ros, typename)
+        except (struct.error, OverflowError, ValueError) as e:
+            raise Dropped("range", f"a number {typename} cannot hold ({e}): dropped") from e
+
+
+class FromRos:
+    """A ROS 2 CDR payload as the onebox message: what an in route does to a sample."""
+
+    def __init__(self, route: Route, store: Typestore) -> None:
+        self.route = route
+        self._store = store
+        self._statics: dict[str, TransformStamped] = {}
+
+    def translate(self, payload: bytes) -> Message:
+        """The onebox message (its pixels, if any, a view of ``payload``); Dropped for what
+        cannot go."""
+        typename = self.route.typename
+        try:
+            ros: Any = self._store.deserialize_cdr(payload, typename)
+        except Exception as e:  # rosbags raises SerdeError, or index and value errors on garbage
+            raise Dropped("decode", f"does not decode as {typename}, dropped: {e}") from e
+        try:
+            message = from_ros(ros, self.route.key, self._statics)
+        except (ValueError, AttributeError, TypeError) as e:
+            raise Dropped("convert", f"dropped: {e}") from e
+        if message is None:
+            raise Dropped(
+                "encoding",
+                f"a {ros.encoding} picture for {self.route.key}, which takes depth (16UC1, "
+                "mono16, 32FC1): dropped",
+            )
+        return message
+
+
 class _Lane:
     """One route's queue and worker thread."""
 
@@ -284,9 +354,12 @@ class _Lane:
                 continue
             try:
                 crossed = self.handle(sample)
+            except Dropped as e:
+                crossed = False
+                self._limiter.warn(self.name, e.kind, str(e))
             except Exception as e:  # one bad sample must never end the lane
                 crossed = False
-                self._limiter.warn(self.name, type(e).__name__, f"dropped: {e}")
+                self._limiter.warn(self.name, type(e).__name__, f"dropped: {e!r}")
             if crossed:
                 self.counts.crossed += 1
             else:
@@ -319,16 +392,13 @@ class _OutLane(_Lane):
         super().__init__(bridge.bus.key(route.key), 2 if route.onebox_type in PICTURES else 64,
                          bridge.limiter)  # fmt: skip
         self.route = route
-        self._bridge = bridge
         self.hash = rmw_zenoh.type_hash(bridge.store, route.typename)
         self.entity = bridge.entity(
             Kind.PUBLISHER, entity_id, Topic(route.topic, route.typename, self.hash, route.qos)
         )
         self._gid = self.entity.gid()
         self._sequence = 0
-        self._decoder: msgspec.msgpack.Decoder[Any] = msgspec.msgpack.Decoder(
-            VIEWS.get(route.onebox_type, route.onebox_type)
-        )
+        self._to_ros = ToRos(route, bridge.store, bridge.messages)
         self.matched = route.latched
         session = bridge.bus.session
         topic_key = rmw_zenoh.topic_key(bridge.domain, route.topic, route.typename, self.hash)
@@ -386,22 +456,7 @@ class _OutLane(_Lane):
             self.offer(sample)
 
     def handle(self, sample: zenoh.Sample) -> bool:
-        payload = sample.payload.to_bytes()
-        try:
-            message = self._decoder.decode(payload)
-        except (msgspec.DecodeError, msgspec.ValidationError) as e:
-            what = self.route.onebox_type.__name__
-            self._limiter.warn(self.name, "decode", f"does not decode as {what}, dropped: {e}")
-            return False
-        try:
-            converted = self._bridge.messages.convert(message)
-        except ValueError as e:
-            self._limiter.warn(self.name, "convert", f"dropped: {e}")
-            return False
-        if converted is None:
-            return False
-        typename, ros = converted
-        cdr = self._bridge.store.serialize_cdr(ros, typename)
+        cdr = self._to_ros.translate(sample.payload.to_bytes())
         self._sequence += 1
         attachment = Attachment(self._sequence, time.time_ns(), self._gid).encode()
         self._publisher.put(_payload(cdr), attachment=attachment)
@@ -414,14 +469,13 @@ class _InLane(_Lane):
     def __init__(self, bridge: Bridge, route: Route, entity_id: int) -> None:
         super().__init__(route.topic, 2 if route.onebox_type in PICTURES else 64, bridge.limiter)
         self.route = route
-        self._bridge = bridge
         self.hash = rmw_zenoh.type_hash(bridge.store, route.typename)
         self.entity = bridge.entity(
             Kind.SUBSCRIPTION, entity_id, Topic(route.topic, route.typename, self.hash, route.qos)
         )
         self.publishers: set[str] = set()
         """The tokens of the ROS 2 publishers seen on this topic."""
-        self._statics: dict[str, TransformStamped] = {}
+        self._from_ros = FromRos(route, bridge.store)
         self._hashes_seen: set[str] = set()
         self._publisher = bridge.bus.publisher(
             route.key, route.onebox_type, latched=route.key == keys.TF_STATIC
@@ -460,26 +514,7 @@ class _InLane(_Lane):
                 "release's definition?); read with Jazzy's, dropped where it does not decode",
                 self.name, hash_, self.hash, self.route.typename,
             )  # fmt: skip
-        payload = sample.payload.to_bytes()
-        try:
-            ros: Any = self._bridge.store.deserialize_cdr(payload, self.route.typename)
-        except Exception as e:  # rosbags raises SerdeError, or struct/index errors on garbage
-            what = self.route.typename
-            self._limiter.warn(self.name, "decode", f"does not decode as {what}, dropped: {e}")
-            return False
-        try:
-            message = from_ros(ros, self.route.key, self._statics)
-        except (ValueError, AttributeError) as e:
-            self._limiter.warn(self.name, "convert", f"dropped: {e}")
-            return False
-        if message is None:
-            self._limiter.warn(
-                self.name,
-                "encoding",
-                f"a {ros.encoding} picture for {self._bridge.bus.key(self.route.key)}, which "
-                "takes depth (16UC1, mono16, 32FC1): dropped",
-            )
-            return False
+        message = self._from_ros.translate(sample.payload.to_bytes())
         self._publisher.publish_bytes(codec(type(message)).encode(message))
         return True
 

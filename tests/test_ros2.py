@@ -5,23 +5,25 @@ hashes), the real sim and the real locator, on private ports."""
 
 from __future__ import annotations
 
+import struct
 import threading
 import time
 
 import msgspec
 import numpy as np
 import pytest
+from mcap_ros2._dynamic import generate_dynamic
 from rosbags.typesys import Stores
 from zenoh.ext import Int64, UInt8, z_serialize
 
 from onebox import keys, rmw_zenoh
 from onebox.errors import SettingError
-from onebox.export.ros2 import typestore
+from onebox.export.ros2 import CAMERA_INFO, IMAGE, RosMessages, typestore
 from onebox.rmw_zenoh import Attachment, Entity, Kind, Qos, Topic
-from onebox.ros2_bridge import OUT_KEYS, plan
+from onebox.ros2_bridge import OUT_KEYS, Dropped, FromRos, ToRos, plan
 from onebox.testing.capture import load_capture
 from onebox.testing.processes import Output, has_key, run_onebox
-from onebox.testing.rmw_peer import JAZZY_HASHES, RmwPeer
+from onebox.testing.rmw_peer import DEFINITIONS, JAZZY_HASHES, RmwPeer, short_name
 from schemas import (
     CameraInfo,
     Detection3DArray,
@@ -429,3 +431,85 @@ def test_bridge_needs_no_ros_node_to_close_cleanly(processes):
     bridge.wait_for("waiting for a ROS 2 publisher on /clock")
     text = bridge.stop()
     assert bridge.proc.returncode == 0 and "Traceback" not in text
+
+
+# --- hostile input, both ways --------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def store():
+    return typestore(Stores.ROS2_JAZZY)
+
+
+def test_every_hostile_onebox_message_is_carried_or_dropped_with_a_reason(store):
+    """The hostile suite's samples (garbage, cut msgpack, huge sizes, NaN, impossible stamps,
+    10,000-frame tf chains) on each bridged key: each becomes CDR that mcap-ros2-support
+    decodes, or is Dropped with a reason; nothing else escapes."""
+    from tests.test_hostile import COLOUR, DEPTH, INFO, TF, bad_samples
+
+    messages = RosMessages(store)
+    routes = {r.key: r for r in plan(out=[DEPTH, COLOUR, INFO, TF])[0]}
+    translators = {key: ToRos(route, store, messages) for key, route in routes.items()}
+    decoders = {
+        key: generate_dynamic(short_name(r.typename), DEFINITIONS[r.typename])[
+            short_name(r.typename)
+        ]
+        for key, r in routes.items()
+    }
+    carried = dropped = 0
+    for key, what, payload in bad_samples([DEPTH, COLOUR, INFO, TF]):
+        try:
+            cdr = translators[key].translate(payload)
+        except Dropped as e:
+            assert str(e), (key, what)
+            dropped += 1
+            continue
+        decoders[key](bytes(cdr))
+        carried += 1
+    assert dropped > 100 and carried > 30
+
+
+def _cdr(store, typename: str, message) -> bytes:
+    return bytes(store.serialize_cdr(message, typename))
+
+
+def test_every_hostile_ros_message_is_dropped_with_a_reason(store):
+    """CDR that is empty, cut, random, big-endian-labelled, of another type, with a 4 GiB
+    sequence or string, not UTF-8, or a colour picture on a depth key is Dropped with a
+    reason; a good picture right after crosses with its pixels."""
+    messages = RosMessages(store)
+    [route] = plan(no_out=True, ins=["/d=camera/depth/image_raw"])[1]
+    depth = FromRos(route, store)
+    capture = load_capture()
+    picture = capture["camera/depth/image_raw"]
+    assert isinstance(picture, Image)
+    good = _cdr(store, IMAGE, messages.image(picture))
+    info = _cdr(store, CAMERA_INFO, messages.camera_info(capture["camera/camera_info"]))
+    colour = _cdr(store, IMAGE, messages.image(capture["camera/image_raw"]))
+    # The data length sits just before the pixels: 4 GiB of them declared.
+    huge = bytearray(good)
+    struct.pack_into("<I", huge, len(good) - len(picture.data) - 4, 0xFFFFFFFF)
+    # The frame id's length sits after the encapsulation and the stamp.
+    long_name = bytearray(good)
+    struct.pack_into("<I", long_name, 12, 0xFFFFFFFF)
+    not_utf8 = good.replace(b"camera_optical_frame", b"\xff" * len("camera_optical_frame"))
+    hostile = {
+        "empty": b"",
+        "one zero": b"\x00",
+        "header only": b"\x00\x01\x00\x00",
+        "random": b"\x00\x01\x00\x00" + np.random.default_rng(3).bytes(1000),
+        "cut in half": good[: len(good) // 2],
+        "4 GiB of pixels": bytes(huge),
+        "4 GiB frame id": bytes(long_name),
+        "not UTF-8": not_utf8,
+        "said big-endian": b"\x00\x00" + good[2:],
+        "another type": info,
+        "colour on depth": colour,
+    }
+    for what, payload in hostile.items():
+        with pytest.raises(Dropped):
+            depth.translate(payload)
+            pytest.fail(f"{what} crossed")
+    crossed = depth.translate(good)
+    assert isinstance(crossed, ImageView) and bytes(crossed.data) == picture.data
+    assert codec(ImageView).encode(crossed) == codec(Image).encode(picture)
