@@ -182,7 +182,11 @@ def test_routes_from_flags_and_presets():
 
 
 def test_command_line_errors_exit_with_the_reason():
-    """Bad flags and a bad ROS_DOMAIN_ID end the command with exit 2 and one line saying why."""
+    """--help explains both directions; bad flags and a bad ROS_DOMAIN_ID end the command with
+    exit 2 and one line saying why."""
+    helped = run_onebox("ros2", "--help")
+    assert helped.returncode == 0
+    assert "--preset {azure_kinect,realsense}" in helped.stdout and "rmw_zenoh" in helped.stdout
     done = run_onebox("ros2", "--in", "/camera/image_raw", "--connect", "tcp/127.0.0.1:1")
     assert done.returncode == 2 and "give TOPIC=KEY" in done.stderr
     done = run_onebox("ros2", env={"ROS_DOMAIN_ID": "abc"})
