@@ -57,6 +57,8 @@ class CameraKeys:
 
 CAMERA = CameraKeys("camera")
 BASIC_CAMERA = CameraKeys("basic_camera")
+DEPTH_KEYS = frozenset({CAMERA.depth, BASIC_CAMERA.depth})
+"""The keys that carry depth pictures (16UC1 or 32FC1), not colour."""
 TF_STATIC = "tf_static"
 CLOCK = "clock"
 DETECTIONS = "detections"

@@ -58,8 +58,10 @@ from onebox.recording import RecordingWriter, output_problem, written_whole
 from onebox.sync import ReportLimiter
 from schemas import (
     CameraInfo,
+    Clock,
     Header,
     Image,
+    ImageView,
     Message,
     Quaternion,
     TFMessage,
@@ -78,6 +80,8 @@ TRANSPORTS = ("/compressedDepth", "/compressed")
 is on ``.../image_raw/compressed`` (colour) or ``.../image_raw/compressedDepth`` (depth)."""
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 TF = "tf2_msgs/msg/TFMessage"
+TRANSFORM = "geometry_msgs/msg/TransformStamped"
+CLOCK = "rosgraph_msgs/msg/Clock"
 DEPTH_ENCODINGS = {"16UC1": "16UC1", "mono16": "16UC1", "32FC1": "32FC1"}
 """A depth picture's encodings, and what onebox calls each (mono16 is 16UC1's other name)."""
 COLOUR_ENCODINGS = ("rgb8", "bgr8", "rgba8", "bgra8")
@@ -276,15 +280,17 @@ def choose(
     return Choice(chosen, lens, picked, tf_static, tuple(pictures), why, tf)
 
 
-def _image(msg: Any, encoding: str) -> Image:
-    return Image(
+def _image(msg: Any, encoding: str) -> ImageView:
+    """The picture with its pixels left in the ROS message's buffer: encoding it copies them
+    once, straight into the onebox message."""
+    return ImageView(
         header=_header(msg.header),
         height=int(msg.height),
         width=int(msg.width),
         encoding=encoding,
         is_bigendian=int(msg.is_bigendian),
         step=int(msg.step),
-        data=msg.data.tobytes(),
+        data=memoryview(msg.data),
     )
 
 
@@ -375,21 +381,44 @@ def _transform(t: Any) -> TransformStamped:
     return _stamped(_header(t.header), str(t.child_frame_id), (v.x, v.y, v.z), (q.x, q.y, q.z, q.w))
 
 
-def _convert(msg: Any, key: str, statics: dict[str, TransformStamped]) -> Message | None:
-    """The onebox message for a bag's message bound for ``key`` (None: not one to import)."""
-    if key in (keys.CAMERA.depth, keys.CAMERA.colour) and hasattr(msg, "format"):
-        return _decompressed(msg)
-    if key == keys.CAMERA.depth:
-        encoding = DEPTH_ENCODINGS.get(str(msg.encoding))
-        return None if encoding is None else _image(msg, encoding)
-    if key == keys.CAMERA.colour:
+FROM_ROS: dict[type[Message], tuple[str, ...]] = {
+    Image: (IMAGE, COMPRESSED),
+    CameraInfo: (CAMERA_INFO,),
+    TFMessage: (TF,),
+    TransformStamped: (TRANSFORM,),
+    Clock: (CLOCK,),
+}
+"""The onebox messages a ROS message becomes, and the ROS types each is read from."""
+
+
+def from_ros(msg: Any, key: str, statics: dict[str, TransformStamped]) -> Message | None:
+    """The onebox message on ``key`` (a key of :data:`onebox.keys.TYPES`, no namespace) for
+    the ROS 2 message ``msg``, or None for a picture whose encoding that key does not carry.
+
+    A depth key takes 16UC1, mono16 (as 16UC1) and 32FC1 only; a CompressedImage is decoded
+    (:func:`_decompressed`). tf_static gathers every transform it is given in ``statics`` (each
+    ROS publisher latches its own; onebox keeps them all in one message). Raises ValueError
+    (or AttributeError, for a message of another type) for what it cannot read.
+    """
+    kind = keys.TYPES.get(key)
+    if kind is Image:
+        if hasattr(msg, "format"):
+            return _decompressed(msg)
+        if key in keys.DEPTH_KEYS:
+            encoding = DEPTH_ENCODINGS.get(str(msg.encoding))
+            return None if encoding is None else _image(msg, encoding)
         return _image(msg, str(msg.encoding))
-    if key == keys.CAMERA.info:
+    if kind is CameraInfo:
         return _camera_info(msg)
-    # Each tf_static publisher latches its own; onebox keeps them all in one message.
-    for t in msg.transforms:
-        statics[str(t.child_frame_id)] = _transform(t)
-    return TFMessage(transforms=list(statics.values()))
+    if kind is TFMessage:
+        for t in msg.transforms:
+            statics[str(t.child_frame_id)] = _transform(t)
+        return TFMessage(transforms=list(statics.values()))
+    if kind is TransformStamped:
+        return _transform(msg)
+    if kind is Clock:
+        return Clock(clock_ns=int(msg.clock.sec) * 1_000_000_000 + int(msg.clock.nanosec))
+    raise ValueError(f"{key}: no ROS 2 message becomes a {kind.__name__ if kind else 'key'}")
 
 
 def _open(source: Path) -> Any:
@@ -619,7 +648,7 @@ def _copy(
             progress(done, total)
         key = routes[connection.topic]
         try:
-            message = _convert(reader.deserialize(raw, connection.msgtype), key, statics)
+            message = from_ros(reader.deserialize(raw, connection.msgtype), key, statics)
         except Exception as e:  # a damaged message of any kind: reported by topic, left out
             result.bad[connection.topic] += 1
             limiter.warn(connection.topic, "bad", f"left out: {type(e).__name__}: {e}")
@@ -629,7 +658,11 @@ def _copy(
             continue
         if isinstance(message, CameraInfo):
             result.distorted |= any(abs(v) > 1e-9 for v in message.d)
-        if motion is not None and key == keys.CAMERA.depth and isinstance(message, Image):
+        if (
+            motion is not None
+            and key == keys.CAMERA.depth
+            and isinstance(message, Image | ImageView)
+        ):
             if world is None:  # decided on the first picture: does the camera move?
                 root, moving = motion.chain(message.header.frame_id)
                 world = (world_frame or root) if moving else ""

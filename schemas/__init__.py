@@ -3,7 +3,16 @@
 from schemas.base import Header, Message
 from schemas.codec import Codec, codec, json_schema, type_name
 from schemas.geometry import Pose, Quaternion, TFMessage, Transform, TransformStamped, Vector3
-from schemas.sensor import FLOAT32, UINT32, CameraInfo, Image, PointCloud, PointField
+from schemas.sensor import (
+    FLOAT32,
+    UINT32,
+    CameraInfo,
+    Image,
+    ImageView,
+    PointCloud,
+    PointCloudView,
+    PointField,
+)
 from schemas.sim import BoxTruth, Clock, GroundTruth, ObjectTruth, TablePlane
 from schemas.vision import (
     BoundingBox3D,
@@ -26,10 +35,12 @@ __all__ = [
     "GroundTruth",
     "Header",
     "Image",
+    "ImageView",
     "Message",
     "ObjectHypothesis",
     "ObjectTruth",
     "PointCloud",
+    "PointCloudView",
     "PointField",
     "Pose",
     "Quaternion",

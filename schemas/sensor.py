@@ -72,3 +72,35 @@ class PointCloud(Message, frozen=True, kw_only=True):
     row_step: int = 0
     data: bytes = b""
     is_dense: bool = True
+
+
+class ImageView(Message, frozen=True, kw_only=True, tag="Image"):
+    """An :class:`Image` whose ``data`` is a view, not a copy: the same message on the wire.
+
+    Decoding into it leaves the pixels where they are, in the received payload; encoding one
+    writes the bytes an :class:`Image` would, reading the pixels from wherever ``data`` points
+    (a ROS message's buffer, a NumPy array). A bridge moves a picture with one copy this way.
+    The fields are :class:`Image`'s, in its order (a test keeps them so).
+    """
+
+    header: Header = Header()
+    height: int = 0
+    width: int = 0
+    encoding: str = ""
+    is_bigendian: int = 0
+    step: int = 0
+    data: memoryview = memoryview(b"")
+
+
+class PointCloudView(Message, frozen=True, kw_only=True, tag="PointCloud"):
+    """A :class:`PointCloud` whose ``data`` is a view, as :class:`ImageView` is an Image's."""
+
+    header: Header = Header()
+    height: int = 1
+    width: int = 0
+    fields: list[PointField] = []
+    is_bigendian: bool = False
+    point_step: int = 0
+    row_step: int = 0
+    data: memoryview = memoryview(b"")
+    is_dense: bool = True

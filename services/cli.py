@@ -30,6 +30,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "info": ("services.info", "summarise an .mcap recording (ros2 bag info)"),
     "export": ("services.export", "write an .mcap recording for ROS 2 or Foxglove tools"),
     "import": ("services.import_bag", "turn a real camera's ROS bag into a onebox recording"),
+    "ros2": ("services.ros2", "bridge onebox keys and ROS 2 topics live, over rmw_zenoh"),
     "pixels": ("services.pixels", "print every pixel of the basic camera (make camera.pixels)"),
     "check": ("services.check", "list what is being published (make camera.check)"),
     "echo": ("services.echo", "print every message on a key, readable (ros2 topic echo)"),
