@@ -49,15 +49,17 @@ top is not one."""
 END_SHARE = 0.5
 """A seam reaches the top's outline at both ends (this share of its last sixth on each side):
 printed lines stop at a margin."""
+SHADE_STEP = 12.0
+"""Two parts of a top whose mean grey levels differ by this much are in shades of their own."""
 MIN_PART_M = 0.04
 """A seam leaves at least this much of the top either side: the narrowest carton."""
 
 
 def seam_map(
     colour: npt.NDArray[np.uint8], depth_m: npt.NDArray[np.float32], lens: Intrinsics
-) -> BoolArray:
+) -> tuple[BoolArray, npt.NDArray[np.uint8]]:
     """Pixels on thin dark lines or strong colour edges (dilated a pixel, so a line is
-    solid)."""
+    solid), and the grey picture they were found in."""
     grey = cv2.cvtColor(np.ascontiguousarray(colour), cv2.COLOR_RGB2GRAY)
     sample = depth_m[:: max(1, depth_m.shape[0] // 32), :: max(1, depth_m.shape[1] // 32)]
     finite = sample[np.isfinite(sample)]
@@ -74,11 +76,57 @@ def seam_map(
     edge = (gx * gx + gy * gy) > (4.0 * max(EDGE_STEP, 6.0 * noise)) ** 2
     seam = (dark > max(DARK_STEP, 4.0 * noise)) | edge
     result: BoolArray = cv2.dilate(seam.astype(np.uint8), None).astype(bool)
+    return result, grey
+
+
+def _tape(
+    strong: BoolArray,
+    position: Float64Array,
+    owner: npt.NDArray[np.intp],
+    offset: npt.NDArray[np.int64],
+    nbins: npt.NDArray[np.int64],
+    slot: npt.NDArray[np.int64],
+    shade: Float64Array,
+) -> BoolArray:
+    """Which strong lines are the edges of tape along a lid: a pair mirrored about the top's
+    middle, the strip between them in a shade of its own, the flaps either side in one shade
+    (three cartons side by side, one of them as wide as the strip, are not alike so)."""
+    total = int(nbins.sum())
+    count = np.bincount(slot, minlength=total).astype(np.float64)
+    summed = np.bincount(slot, weights=shade, minlength=total)
+    # Running sums within each top: the shade of any run of its cross-sections.
+    run_count = np.cumsum(count) - np.repeat(np.cumsum(count)[offset] - count[offset], nbins)
+    run_sum = np.cumsum(summed) - np.repeat(np.cumsum(summed)[offset] - summed[offset], nbins)
+    last = offset + nbins - 1
+    local = np.arange(total) - offset[owner]
+    twin = offset[owner] + np.clip(nbins[owner] - 1 - local, 0, nbins[owner] - 1)
+    mirrored = strong & (strong[twin] | strong[np.clip(twin - 1, 0, total - 1)]
+                         | strong[np.clip(twin + 1, 0, total - 1)])
+    high = np.maximum(np.arange(total), twin)
+    low = np.minimum(np.arange(total), twin)
+
+    def mean(upto: npt.NDArray[np.intp], start: npt.NDArray[np.intp]) -> Float64Array:
+        before_count = np.where(start > offset[owner], run_count[np.maximum(start - 1, 0)], 0.0)
+        before_sum = np.where(start > offset[owner], run_sum[np.maximum(start - 1, 0)], 0.0)
+        n = run_count[upto] - before_count
+        result: Float64Array = (run_sum[upto] - before_sum) / np.maximum(n, 1.0)
+        return result
+
+    middle = mean(high, low)
+    below = mean(np.maximum(low - 1, offset[owner]), offset[owner])
+    above = mean(last[owner], np.minimum(high + 1, last[owner]))
+    flaps_alike = np.abs(above - below) < SHADE_STEP
+    strip_apart = np.abs(middle - 0.5 * (above + below)) >= SHADE_STEP
+    result: BoolArray = mirrored & (np.abs(position) > 0) & flaps_alike & strip_apart
     return result
 
 
 def split_at_seams(
-    tops: Tops, seam: BoolArray, depth_m: npt.NDArray[np.float32], lens: Intrinsics
+    tops: Tops,
+    seam: BoolArray,
+    grey: npt.NDArray[np.uint8],
+    depth_m: npt.NDArray[np.float32],
+    lens: Intrinsics,
 ) -> IntArray | None:
     """New labels with every top cut at the seam that crosses it best, or None."""
     labels = tops.labels
@@ -99,6 +147,7 @@ def split_at_seams(
     along = a * ax[:, 0] + b * ax[:, 1]
     across = b * ax[:, 0] - a * ax[:, 1]
     on_seam = seam.ravel()[index].astype(np.float64)
+    shade = grey.ravel()[index].astype(np.float64)
     step = np.sqrt(np.maximum(tops.area_m2 / np.maximum(tops.pixels, 1), 1e-12))
     cut_top = np.full(n, False)
     cut_along = np.full(n, False)
@@ -140,7 +189,8 @@ def split_at_seams(
             & (ends[0] >= END_SHARE)
             & (ends[1] >= END_SHARE)
         )
-        score = np.where(strong, share, 0.0)
+        score = np.where(strong & ~_tape(strong, position, owner, offset, nbins, slot, shade),
+                         share, 0.0)
         peak = np.maximum.reduceat(score, offset)
         where = np.zeros(n, dtype=np.int64)
         hit = np.flatnonzero(score > 0)

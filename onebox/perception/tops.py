@@ -156,7 +156,7 @@ def find_tops(
     if seam is None:
         return tops
     for _ in range(SEAM_ROUNDS):
-        split = seams.split_at_seams(tops, seam, depth_m, lens)
+        split = seams.split_at_seams(tops, seam[0], seam[1], depth_m, lens)
         if split is None:
             break
         tops = _measure(split, depth_m, surface, lens, basis)
