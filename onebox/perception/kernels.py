@@ -48,6 +48,36 @@ def extents_at_angles(
 
 
 @numba.njit(cache=True, nogil=True)
+def extents_at_own_angles(
+    label: IntArray, a: Float64Array, b: Float64Array, angles: Float64Array
+) -> Float64Array:
+    """As :func:`extents_at_angles`, each top at angles of its own: ``angles`` is (count, m)."""
+    count, n_angles = angles.shape
+    out = np.empty((count, n_angles, 4))
+    out[:, :, 0] = np.inf
+    out[:, :, 1] = -np.inf
+    out[:, :, 2] = np.inf
+    out[:, :, 3] = -np.inf
+    cos = np.cos(angles)
+    sin = np.sin(angles)
+    for i in range(label.shape[0]):
+        k = label[i]
+        for j in range(n_angles):
+            p = a[i] * cos[k, j] + b[i] * sin[k, j]
+            q = b[i] * cos[k, j] - a[i] * sin[k, j]
+            row = out[k, j]
+            if p < row[0]:
+                row[0] = p
+            if p > row[1]:
+                row[1] = p
+            if q < row[2]:
+                row[2] = q
+            if q > row[3]:
+                row[3] = q
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
 def extents(label: IntArray, p: Float64Array, q: Float64Array, count: int) -> Float64Array:
     """For each top, (min p, max p, min q, max q) of its points: shape (count, 4)."""
     out = np.empty((count, 4))
@@ -122,6 +152,7 @@ def warm_up() -> None:
     label = np.zeros(2, dtype=np.int32)
     a = np.array([0.0, 1.0])
     extents_at_angles(label, a, a, 1, np.array([0.0, 0.5]))
+    extents_at_own_angles(label, a, a, np.array([[0.0, 0.5]]))
     extents(label, a, a, 1)
     grid = np.zeros((2, 2), dtype=np.int32)
     grid[0, 0] = 1
