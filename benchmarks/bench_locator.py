@@ -13,7 +13,9 @@ Timed in one process, on the same pictures (ray-cast, answers known, 0.5 mm nois
   (the support plane checked, not fitted again);
 - boxes, fresh: the same with the support plane fitted from scratch;
 - one labelling of the standing pixels the finder reads (``ndimage.label``): a floor under any
-  finder that splits a picture into objects with these libraries.
+  finder that splits a picture into objects with these libraries;
+- the first picture of a fresh process: the imports, ``kernels.warm_up()`` (numba compiling
+  the kernels into an empty cache, then loading them from it) and the first two pictures.
 
 Then, on ray-cast pictures with known answers: a noisy pallet, a cluttered desk, empty tables,
 a stream of still pictures (the ids), tables with only round things on them (tins upright
@@ -30,18 +32,25 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import functools
+import json
 import math
+import os
+import subprocess
+import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 from scipy import ndimage
 
 from onebox.geometry import to_world
 from onebox.perception import seed as seed_method
-from onebox.perception.boxes import BoxFinder, FinderSettings, find_boxes, read_stride
+from onebox.perception.boxes import FinderSettings, find_boxes, read_stride
 from onebox.perception.register import colour_offset
+from onebox.perception.stream import BoxFinder
 from onebox.perception.support import fit_support, support_holds
-from onebox.perception.tops import height_slope
+from onebox.perception.surface import height_slope
 from onebox.rectify import lens_of
 from onebox.testing.raycast import (
     Box,
@@ -123,7 +132,7 @@ def speed(repeats: int) -> None:
         )
         # The least any finder that splits the picture into objects does: label it once (the
         # pixels the finder reads: every k-th of a picture over max_pixels).
-        slope = height_slope(camera.width, camera.height, lens, support.normal_camera)
+        slope = height_slope(lens, camera.width, camera.height, support.normal_camera)
         standing = depth * slope + np.float32(support.offset_camera_m) > np.float32(0.01)
         k = read_stride(depth.shape, FinderSettings().max_pixels)
         label = timed(lambda: ndimage.label(standing[::k, ::k]), repeats)  # noqa: B023
@@ -148,6 +157,53 @@ def speed(repeats: int) -> None:
             f"{shift[0]:.2f}/{shift[1]:.2f} ms ({colour_offset(depth, off, support.sigma_m)}; "
             f"a BoxFinder measures it every {every} pictures: {shift[0] / every:.2f} ms a picture)"
         )
+
+
+FIRST_PICTURE = """
+import json, time
+start = time.perf_counter()
+from onebox.geometry import Intrinsics
+from onebox.perception import kernels
+from onebox.perception.boxes import find_boxes
+from onebox.testing import synthetic
+imported = time.perf_counter()
+kernels.warm_up()
+warmed = time.perf_counter()
+scene = synthetic.Scene(width=640, height=480)
+depth, lens = synthetic.depth_picture(scene), Intrinsics.from_k(scene.k)
+times = []
+for _ in range(2):
+    begin = time.perf_counter()
+    found = find_boxes(depth, lens, scene.camera_to_world()).boxes
+    times.append(time.perf_counter() - begin)
+print(json.dumps([imported - start, warmed - imported, *times, len(found)]))
+"""
+"""A fresh process: the finder's imports, ``kernels.warm_up()``, then the seed's scene at
+640 x 480 read twice (seconds each), and the boxes found."""
+
+
+def first_picture_cost() -> None:
+    """What a fresh process pays before its first picture: numba compiling the kernels (an
+    empty cache directory), or loading them from the cache it wrote (the same directory)."""
+    root = str(Path(__file__).resolve().parent.parent)
+    with tempfile.TemporaryDirectory() as cache:
+        env = {**os.environ, "NUMBA_CACHE_DIR": cache, "PYTHONPATH": root}
+        for label in ("compiled (empty cache)", "loaded from the cache"):
+            done = subprocess.run(
+                [sys.executable, "-c", FIRST_PICTURE],
+                env=env,
+                capture_output=True,
+                text=True,
+                check=True,
+                timeout=300,
+            )
+            *seconds, found = json.loads(done.stdout)
+            imports, warm, first, second = (1e3 * t for t in seconds)
+            print(
+                f"first picture, kernels {label}: imports {imports:.0f} ms, "
+                f"kernels.warm_up() {warm:.0f} ms, then the seed's scene at 640x480 "
+                f"{first:.1f} ms, again {second:.1f} ms ({found} box found)"
+            )
 
 
 def scaling(repeats: int) -> None:
@@ -517,6 +573,7 @@ def main() -> None:
     )
     args = parser.parse_args()
     speed(args.repeats)
+    first_picture_cost()
     if args.scaling:
         scaling(args.repeats)
     rectify_cost(args.repeats)
