@@ -52,6 +52,8 @@ PROBES_PER_SIDE = 9
 """Points looked at just past each side of a top."""
 PROBE_REACH_M = 0.012
 """...this far past it (and at least two pixels): past a smeared edge, within a gap."""
+PLATFORM_COVERED = 0.5
+"""A top carrying boxes with more than this share of it hidden is a platform, not a box."""
 CROP_MARGIN_PX = 16
 """Pixels kept round everything standing, for what is looked at just past a top's sides."""
 CANDIDATES = 4
@@ -208,6 +210,10 @@ def find_boxes(
     round_ = _look_round(tops, depth, lens, support)
     is_box = _boxes(tops, round_, settings)
     base, on = _bases(tops, round_, depth, lens, support)
+    # A top that boxes stand on and that is mostly hidden under them is a platform (a pallet's
+    # top, a shelf): a level to stand on, not a box to report.
+    carries = np.bincount(on[is_box & (on >= 0)], minlength=len(tops)) > 0
+    is_box &= ~(carries & (round_.covered >= PLATFORM_COVERED))
     return Found(
         support, _report(tops, round_, is_box, base, on, support, camera_to_world, settings), frame
     )
