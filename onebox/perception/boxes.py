@@ -275,9 +275,6 @@ class Round:
 def _look_round(tops: Tops, depth_m: Float32Array, lens: Intrinsics, support: Support) -> Round:
     """Probe points just past each side of every top, on the top's plane extended: what the
     camera sees along the ray to each (see :class:`Round`)."""
-    n = len(tops)
-    rows, cols = depth_m.shape
-    e1, e2, normal = tops.basis
     axis = tops.axis_ab
     perp = np.stack([-axis[:, 1], axis[:, 0]], axis=1)
     half = np.stack([tops.length_m, tops.width_m], axis=1) * 0.5
@@ -320,10 +317,9 @@ def _covered(
 ) -> tuple[Float64Array, Float64Array]:
     """How much of each top's rectangle, and of its four corners, something nearer hides (a
     box standing on it, an object in front): a grid of points on the rectangle, looked at."""
-    n = len(tops)
     grid = np.linspace(-0.45, 0.45, COVER_GRID)
-    s, t = np.meshgrid(grid, grid, indexing="ij")
-    s, t = s.ravel(), t.ravel()
+    s_grid, t_grid = np.meshgrid(grid, grid, indexing="ij")
+    s, t = s_grid.ravel(), t_grid.ravel()
     axis = tops.axis_ab
     perp = np.stack([-axis[:, 1], axis[:, 0]], axis=1)
     ab = (
@@ -331,9 +327,7 @@ def _covered(
         + (s[None, :, None] * tops.length_m[:, None, None]) * axis[:, None, :]
         + (t[None, :, None] * tops.width_m[:, None, None]) * perp[:, None, :]
     )
-    z_expected, seen, _, _ = _sight(
-        ab, tops.height_m[:, None], tops.basis, depth_m, lens, support
-    )
+    z_expected, seen, _, _ = _sight(ab, tops.height_m[:, None], tops.basis, depth_m, lens, support)
     tolerance = np.maximum(3.0 * tops.sigma_m, 0.006)[:, None]
     with np.errstate(invalid="ignore"):
         nearer = seen < z_expected - 4.0 * tolerance
@@ -397,10 +391,10 @@ def _bases(
     """The level each top stands on, and which top that is (-1: the support).
 
     The candidates are the support and the lower tops seen round the top, near it, or whose
-    rectangle holds its middle (a lower top seen only in a gap). Each is looked for at its own height
-    just past the top's sides: a box stands on the level found there on the most probes (a box
-    on a wider box finds it all round; a box beside a lower one finds it on one side only, and
-    its own base level on the others). Ties go to the higher level."""
+    rectangle holds its middle (a lower top seen only in a gap). Each is looked for at its own
+    height just past the top's sides: a box stands on the level found there on the most probes
+    (a box on a wider box finds it all round; a box beside a lower one finds it on one side
+    only, and its own base level on the others). Ties go to the higher level."""
     n = len(tops)
     lower = tops.height_m[None, :] < tops.height_m[:, None] - 0.01  # (k top, j lower)
     seen = round_.seen_top.reshape(n, -1)

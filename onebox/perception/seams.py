@@ -75,8 +75,10 @@ def seam_map(
     # A Sobel response is 4 x the step between neighbours.
     edge = (gx * gx + gy * gy) > (4.0 * max(EDGE_STEP, 6.0 * noise)) ** 2
     seam = (dark > max(DARK_STEP, 4.0 * noise)) | edge
-    result: BoolArray = cv2.dilate(seam.astype(np.uint8), None).astype(bool)
-    return result, grey
+    result: BoolArray = np.asarray(
+        cv2.dilate(seam.astype(np.uint8), np.ones((3, 3), np.uint8)), dtype=bool
+    )
+    return result, np.asarray(grey, dtype=np.uint8)
 
 
 def _tape(
@@ -100,8 +102,11 @@ def _tape(
     last = offset + nbins - 1
     local = np.arange(total) - offset[owner]
     twin = offset[owner] + np.clip(nbins[owner] - 1 - local, 0, nbins[owner] - 1)
-    mirrored = strong & (strong[twin] | strong[np.clip(twin - 1, 0, total - 1)]
-                         | strong[np.clip(twin + 1, 0, total - 1)])
+    mirrored = strong & (
+        strong[twin]
+        | strong[np.clip(twin - 1, 0, total - 1)]
+        | strong[np.clip(twin + 1, 0, total - 1)]
+    )
     high = np.maximum(np.arange(total), twin)
     low = np.minimum(np.arange(total), twin)
 
@@ -135,7 +140,7 @@ def split_at_seams(
         return None
     top = labels.ravel()[index] - 1
     n = len(tops)
-    rows, cols = labels.shape
+    cols = labels.shape[1]
     r, c = np.divmod(index, cols)
     z = depth_m.ravel()[index].astype(np.float64)
     x = (c - lens.cx) / lens.fx * z
@@ -189,8 +194,9 @@ def split_at_seams(
             & (ends[0] >= END_SHARE)
             & (ends[1] >= END_SHARE)
         )
-        score = np.where(strong & ~_tape(strong, position, owner, offset, nbins, slot, shade),
-                         share, 0.0)
+        score = np.where(
+            strong & ~_tape(strong, position, owner, offset, nbins, slot, shade), share, 0.0
+        )
         peak = np.maximum.reduceat(score, offset)
         where = np.zeros(n, dtype=np.int64)
         hit = np.flatnonzero(score > 0)

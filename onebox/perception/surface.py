@@ -104,8 +104,9 @@ def read_surface(depth_m: Float32Array, lens: Intrinsics, support: Support) -> S
     reach = normal_reach(support)
     up = _faces_up(depth_m, valid, lens, support, reach)
     # The 3 x 3 spread of heights; no reading counts as neither high nor low.
-    high = cv2.dilate(np.where(valid, height, -np.inf).astype(np.float32), None)
-    low = cv2.erode(np.where(valid, height, np.inf).astype(np.float32), None)
+    square = np.ones((3, 3), np.uint8)
+    high = cv2.dilate(np.where(valid, height, -np.inf).astype(np.float32), square)
+    low = cv2.erode(np.where(valid, height, np.inf).astype(np.float32), square)
     with np.errstate(invalid="ignore", over="ignore"):
         step = (high - low) > np.maximum(STEP_SIGMAS * sigma, MIN_STEP_M)
     return Surface(height, sigma, up & valid, step & valid, slope, reach)
@@ -116,7 +117,7 @@ def normal_reach(support: Support) -> int:
     tilt a flat top over the lump's width, so look wider (when there is noise to speak of: a
     wider window also blurs a narrow top's normals into its neighbours')."""
     if support.lump_px > 1.0 and support.sigma_m > LUMPY_NOISE_M:
-        return min(int(math.ceil(support.lump_px)) + 1, 6)
+        return min(math.ceil(support.lump_px) + 1, 6)
     return NORMAL_REACH_PX
 
 

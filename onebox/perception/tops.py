@@ -119,7 +119,8 @@ def standing_regions(surface: Surface, min_height_m: float, max_height_m: float 
             standing &= height < max_height_m
     core = (standing & ~surface.step).astype(np.uint8)
     core = cv2.morphologyEx(core, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
-    _, labels = cv2.connectedComponents(core, connectivity=4, ltype=cv2.CV_32S)
+    _, found = cv2.connectedComponents(core, connectivity=4, ltype=cv2.CV_32S)
+    labels: IntArray = np.asarray(found, dtype=np.int32)
     # Grow the regions back over the pixels cut at steps and the edge pixels whose normal the
     # smoothing turned, where at the height of the region beside them.
     with np.errstate(invalid="ignore"):
@@ -190,7 +191,8 @@ def join_hidden(
     )
     height = 0.5 * (tops.height_m[i] + tops.height_m[j])
     e1, e2, normal = tops.basis
-    point = ab[..., :1] * e1 + ab[..., 1:] * e2 + (height - support.offset_camera_m)[:, None, None] * normal
+    lift = (height - support.offset_camera_m)[:, None, None]
+    point = ab[..., :1] * e1 + ab[..., 1:] * e2 + lift * normal
     z = point[..., 2]
     with np.errstate(invalid="ignore", divide="ignore"):
         u = np.rint(lens.fx * point[..., 0] / z + lens.cx)
@@ -291,9 +293,10 @@ def _measure(
 
     # The rectangle's angle: the smallest rectangle round the outline.
     flat_labels = labels.astype(np.float32)
+    square = np.ones((3, 3), np.uint8)
     edge = (labels > 0) & (
-        (cv2.erode(flat_labels, None) != flat_labels)
-        | (cv2.dilate(flat_labels, None) != flat_labels)
+        (cv2.erode(flat_labels, square) != flat_labels)
+        | (cv2.dilate(flat_labels, square) != flat_labels)
     )
     on_edge = edge.ravel()[pts.index]
     # Coarse, then fine about the best.
@@ -321,7 +324,7 @@ def _measure(
     keep = _within_profile(top, p, step, n) & _within_profile(top, q, step, n)
     keep |= np.bincount(top, weights=keep, minlength=n)[top] == 0  # nothing kept: keep all
     box = kernels.extents(np.where(keep, top, -1).astype(np.int32), p, q, n)
-    area = np.bincount(top, weights=footprint * keep, minlength=n)
+    area = np.bincount(top, weights=footprint * keep, minlength=n).astype(np.float64)
     box[:, 0] -= 0.5 * step
     box[:, 1] += 0.5 * step
     box[:, 2] -= 0.5 * step
