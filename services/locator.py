@@ -56,7 +56,7 @@ from scipy.spatial.transform import Rotation
 from onebox import bus, geometry, keys, memory, pictures, settings, sync
 from onebox.errors import SettingError
 from onebox.geometry import FrameError, FrameTree, matrix_of
-from onebox.perception import register, seed
+from onebox.perception import kernels, register, seed
 from onebox.perception.boxes import MAX_PIXELS, Box, FinderSettings, Found
 from onebox.perception.catalogue import Entry, read_catalogue
 from onebox.perception.stream import BoxFinder
@@ -526,6 +526,12 @@ class Locator:
         """The camera's frame and world_frame <- it as last used, to say when tf_static moves it."""
         self._said_rectified = False
         self._finder = BoxFinder(config.finder())
+        if config.method == "boxes":
+            # Compile the finder's kernels (or load them from the cache) now, not on the
+            # first picture.
+            started = time.monotonic()
+            kernels.warm_up()
+            log.info("finder ready in %.1f s", time.monotonic() - started)
         self._said_shift = self._finder.registration.shift
         self._started_s = time.monotonic()
         self._detections = b.publisher(keys.DETECTIONS, Detection3DArray)
