@@ -28,15 +28,21 @@ The pipeline, one module a physical effect:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
+import cv2
 import numpy as np
 import numpy.typing as npt
 
 from onebox.geometry import Intrinsics
 from onebox.perception import register
 from onebox.perception.catalogue import Entry, match
-from onebox.perception.support import Support, fit_support
+from onebox.perception.support import (
+    Support,
+    fit_support,
+    lump_width,
+    noise_against,
+)
 from onebox.perception.surface import height_slope, read_surface
 from onebox.perception.tops import Tops, find_tops
 
@@ -54,6 +60,8 @@ PROBE_REACH_M = 0.012
 """...this far past it (and at least two pixels): past a smeared edge, within a gap."""
 PLATFORM_COVERED = 0.5
 """A top carrying boxes with more than this share of it hidden is a platform, not a box."""
+SMOOTH_SIGMA_M = 0.008
+"""Depth noisier than this at the support is read through a 5 x 5 median first."""
 CROP_MARGIN_PX = 16
 """Pixels kept round everything standing, for what is looked at just past a top's sides."""
 CANDIDATES = 4
@@ -198,6 +206,8 @@ def find_boxes(
         )
     if support is None:
         return Found(None, [], frame)
+    if settings.noise_sigma_m is None and support.sigma_m > SMOOTH_SIGMA_M:
+        depth, support = _smoothed(depth, lens, support)
     depth, colour, lens = _standing_crop(depth, colour, lens, support, settings.min_height_m)
     if depth.size == 0:
         return Found(support, [], frame)
@@ -217,6 +227,20 @@ def find_boxes(
     return Found(
         support, _report(tops, round_, is_box, base, on, support, camera_to_world, settings), frame
     )
+
+
+def _smoothed(
+    depth_m: Float32Array, lens: Intrinsics, support: Support
+) -> tuple[Float32Array, Support]:
+    """Depth too noisy for a box's step (a stereo camera past two metres) through a 5 x 5
+    median, which keeps steps and edges and cuts the noise about 2.5-fold, and the noise
+    measured again on the support."""
+    valid = np.isfinite(depth_m)
+    smooth = cv2.medianBlur(np.where(valid, depth_m, 0.0).astype(np.float32), 5)
+    smooth[~valid | (smooth <= 0)] = np.nan
+    sigma = noise_against(smooth, lens, support)
+    lumped = replace(support, sigma_m=sigma)
+    return smooth, replace(lumped, lump_px=lump_width(smooth, lens, lumped))
 
 
 def _standing_crop(
