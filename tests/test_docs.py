@@ -107,7 +107,8 @@ def test_every_flag_on_its_own_is_one_some_command_or_benchmark_has():
 def test_every_command_is_in_the_readme():
     """Each command `onebox --help` lists is named in the README as `onebox NAME`."""
     named = {line.split()[0] for page, line in _commands() if page == "README.md"}
-    assert not set(cli.COMMANDS) - named
+    missing = sorted(set(cli.COMMANDS) - named)
+    assert not missing, f"commands the README does not name: {missing}"
 
 
 def test_every_onebox_variable_is_one_onebox_reads():
