@@ -2,7 +2,7 @@
 pictures arrive as fast as one publisher can send them, and after the flood stops.
 
     python benchmarks/bench_faults.py                 # a 1-minute flood
-    python benchmarks/bench_faults.py --minutes 5     # the README's figure
+    python benchmarks/bench_faults.py --minutes 2     # the figures in docs/benchmarks.md
 
 A private router; two locators side by side on the same flood, one with glibc's malloc as it
 comes (``ONEBOX_MALLOC=glibc``) and one as onebox runs it (a fixed mmap threshold, two arenas,

@@ -200,13 +200,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "metres): a top that fits one takes its height, and its name as a second class",
     )
     match = parser.add_argument_group("matching")
-    match.add_argument(
-        "--slop-ms",
-        type=float,
-        default=0.0,
-        metavar="MS",
-        help="pair a depth picture with camera info, colour (and pose) stamped up to MS apart; "
-        "0 pairs equal stamps only, as the simulated camera sends (default 0)",
+    settings.add(
+        match,
+        "slop_ms",
+        0.0,
+        "pair a depth picture with camera info, colour (and pose) stamped up to this many "
+        "milliseconds apart; 0 pairs equal stamps only, as the simulated camera sends",
     )
     match.add_argument(
         "--pose-source",
@@ -265,7 +264,7 @@ class LocatorSettings:
         if args.min_height < 0:
             raise SettingError(f"min_height {args.min_height}: must be 0 or more (metres)")
         if args.slop_ms < 0:
-            raise SettingError(f"--slop-ms {args.slop_ms}: must be 0 or more")
+            raise SettingError(f"slop_ms {args.slop_ms}: must be 0 or more (milliseconds)")
         if args.queue_size < 1:
             raise SettingError(f"--queue-size {args.queue_size}: must be at least 1")
         if args.log_interval_s <= 0:

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from onebox import bus, geometry, pictures, sync
+from onebox import bus, geometry, pictures, settings, sync
 from onebox.errors import SettingError
 from onebox.rectify import lens_of
 from onebox.sync import StampClock, Stamped, StampMatcher
@@ -50,12 +50,11 @@ FIELDS = [
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     bus.add_arguments(parser)
-    parser.add_argument(
-        "--slop-ms",
-        type=float,
-        default=0.0,
-        metavar="MS",
-        help="pair messages stamped up to MS apart; 0 pairs equal stamps only (default 0)",
+    settings.add(
+        parser,
+        "slop_ms",
+        0.0,
+        "pair messages stamped up to this many milliseconds apart; 0 pairs equal stamps only",
     )
     parser.add_argument(
         "--frames", type=int, metavar="N", help="stop after publishing N point clouds"
@@ -100,7 +99,7 @@ class PointsSettings:
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> PointsSettings:
         if not args.slop_ms >= 0:
-            raise SettingError(f"--slop-ms {args.slop_ms}: must be 0 or more")
+            raise SettingError(f"slop_ms {args.slop_ms}: must be 0 or more (milliseconds)")
         if not args.log_interval_s > 0:
             raise SettingError(f"--log-interval-s {args.log_interval_s}: must be above 0")
         if args.frames is not None and args.frames < 1:

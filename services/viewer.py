@@ -16,26 +16,25 @@ Writes: nothing on the bus. Rerun's time is simulated time (``sim_time``, each h
 Where it shows them:
   - with a display ($DISPLAY or $WAYLAND_DISPLAY): the native Rerun viewer;
   - without one: a web viewer served on loopback (a ``rerun --serve-web`` child process); the
-    address to open is printed. Its ports are settings (GRPC_PORT, WEB_PORT); left at 0 they
-    are 9876 and 9090 when free and any free ports otherwise, so a second pipeline's viewer
-    starts beside the first. The server keeps --memory-limit of data for late browsers and
-    sends a late page the newest first; what never changes (lens, tf_static, table) and the
-    newest pose, support plane and true boxes are static and always kept. The page's viewer
-    drops its oldest data once its memory passes --page-memory-limit (Rerun's own page keeps
-    everything up to 2.3 GiB), so its heap stops growing. A live page gets the
-    pictures at most --picture-hz times a second, --picture-scale times smaller, and the
-    boxes with every capture: a software-rendered browser takes data in only as fast as it
-    draws, so every message costs;
+    address to open is printed. Its ports are settings (ONEBOX_GRPC_PORT, ONEBOX_WEB_PORT); left at
+    0 they are 9876 and 9090 when free and any free ports otherwise, so a second pipeline's viewer
+    starts beside the first. The server keeps --memory-limit of data for late browsers and sends a
+    late page the newest first; what never changes (lens, tf_static, table) and the newest pose,
+    support plane and true boxes are static and always kept. The page's viewer drops its oldest data
+    once its memory passes --page-memory-limit (Rerun's own page keeps everything up to 2.3 GiB), so
+    its heap stops growing. A live page gets the pictures at most --picture-hz times a second,
+    --picture-scale times smaller, and the boxes with every capture: a software-rendered browser
+    takes data in only as fast as it draws, so every message costs;
   - --save FILE.rrd: a recording instead, which ``rerun FILE.rrd`` opens later (refused if it
     exists, unless --overwrite; nothing is left behind on failure).
 The layout is the seed's config/one_box.rviz: the 3D view beside the colour and depth pictures;
 the 3D view on a plain white background without Rerun's endless grid (the table's grid is the
 floor), which a software-rendered page redrew at 1 to 2 frames a second with nothing else shown.
 
-Settings: viewer (environment VIEWER, config [viewer] viewer; the seed's rviz:=false). With
-``VIEWER=false`` it logs "viewer off" and idles until stopped, so ``honcho start`` keeps the
-other processes running. --frames N stops after N complete captures (colour, depth, info and
-detections of one stamp), --duration-s S after S seconds: for tests and benchmarks.
+Settings: viewer (environment ONEBOX_VIEWER, config [viewer] viewer; the seed's rviz:=false).
+With ``ONEBOX_VIEWER=false`` it logs "viewer off" and idles until stopped, so ``honcho start``
+keeps the other processes running. --frames N stops after N complete captures (colour, depth,
+info and detections of one stamp), --duration-s S after S seconds: for tests and benchmarks.
 A slow viewer keeps the newest message on each key and says how many it dropped. A message it
 will not draw (a stamp outside 0..2^63 ns, NaN, a zero quaternion, a tf_static cycle or a chain
 deeper than 64 frames, a picture or cloud whose sizes do not fit its bytes) is logged with its
@@ -158,7 +157,7 @@ class LatestPerKey:
 
 def idle() -> int:
     """The seed's rviz:=false: stay up, doing nothing, so honcho keeps the rest running."""
-    log.info("viewer off (VIEWER=false); idling until stopped")
+    log.info("viewer off (ONEBOX_VIEWER=false); idling until stopped")
     threading.Event().wait()
     return 0
 

@@ -201,6 +201,15 @@ def test_locator_refuses_a_setting_it_cannot_use_in_one_line(flag, says):
     assert done.stderr == f"onebox locator: {says}\n"
 
 
+@pytest.mark.parametrize("command", ["locator", "points"])
+def test_slop_is_a_setting_that_honcho_passes_on(command):
+    """ONEBOX_SLOP_MS reaches the locator and points as --slop-ms does (a real camera's stamps
+    under `honcho start`): a negative one is refused in one line naming the setting."""
+    done = onebox(command, env={"ONEBOX_SLOP_MS": "-5"})
+    assert done.returncode == 2
+    assert done.stderr == f"onebox {command}: slop_ms -5.0: must be 0 or more (milliseconds)\n"
+
+
 def test_a_mistyped_command_suggests_the_right_one():
     """`onebox ehco` says: did you mean `onebox echo`?"""
     done = onebox("ehco", "detections")
