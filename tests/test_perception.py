@@ -40,7 +40,7 @@ from onebox.testing.raycast import (
     render,
     table_on_legs,
     taped,
-)  # fmt: skip
+)
 from onebox.world.noise import PRESETS, DepthNoise
 
 TAN = ((200, 150, 90), (140, 100, 60))

@@ -60,8 +60,9 @@ PROBE_REACH_M = 0.012
 """...this far past it (and at least two pixels): past a smeared edge, within a gap."""
 PLATFORM_COVERED = 0.5
 """A top carrying boxes with more than this share of it hidden is a platform, not a box."""
-SMOOTH_SIGMA_M = 0.008
-"""Depth noisier than this at the support is read through a 5 x 5 median first."""
+SMOOTH_SIGMA_M = 0.01
+"""Depth noisier than this at the support is read through a 5 x 5 median first (a camera
+reporting depth in steps of a centimetre, at 0.7 m, is left as it is)."""
 CROP_MARGIN_PX = 16
 """Pixels kept round everything standing, for what is looked at just past a top's sides."""
 CANDIDATES = 4
