@@ -125,7 +125,7 @@ XFAIL: dict[str, str] = {
     "a small box where the depth is clean": "both found, the small box 26.4 x 25.2 mm for 25 x "
     "23 (bound 2 mm)",
     "narrow boxes under a tilted camera": "none of the 4 boxes 1.5-2 cm wide found",
-    "cartons on a pallet, d435": "2 of the 0.2 m cartons missed (taken for platforms); 8 of "
+    "cartons on a pallet, d435": "2 of the 0.2 m cartons missed; 8 of "
     "the others measured 0.05-0.1 m tall, from their lower neighbours' tops",
     "cartons on a pallet, azure kinect": "3 cartons missed, every other one measured "
     "0.05-0.1 m tall from its neighbours' tops, the pallet's near strip a box (1.203 x 0.067 m)",
