@@ -209,16 +209,25 @@ def find_boxes(
         return Found(None, [], frame)
     if settings.noise_sigma_m is None and support.sigma_m > SMOOTH_SIGMA_M:
         depth, support = _smoothed(depth, lens, support)
-    depth, colour, lens = _standing_crop(depth, colour, lens, support, settings.min_height_m)
-    if depth.size == 0:
+    crop, colour_crop, crop_lens, origin = _standing_crop(
+        depth, colour, lens, support, settings.min_height_m
+    )
+    if crop.size == 0:
         return Found(support, [], frame)
-    surface = read_surface(depth, lens, support)
+    surface = read_surface(crop, crop_lens, support)
     tops = find_tops(
-        depth, surface, lens, support, colour, settings.min_height_m, settings.max_height_m
+        crop,
+        surface,
+        crop_lens,
+        support,
+        colour_crop,
+        settings.min_height_m,
+        settings.max_height_m,
     )
     if len(tops) == 0:
         return Found(support, [], frame)
-    round_ = _look_round(tops, depth, lens, support)
+    # What lies round the tops is looked at in the whole picture.
+    round_ = _look_round(tops, origin, depth, lens, support)
     is_box = _boxes(tops, round_, settings)
     base, on = _bases(tops, round_, depth, lens, support)
     # A top that boxes stand on and that is mostly hidden under them is a platform (a pallet's
@@ -237,7 +246,9 @@ def _smoothed(
     median, which keeps steps and edges and cuts the noise about 2.5-fold, and the noise
     measured again on the support."""
     valid = np.isfinite(depth_m)
-    smooth = cv2.medianBlur(np.where(valid, depth_m, 0.0).astype(np.float32), 5)
+    smooth: Float32Array = np.asarray(
+        cv2.medianBlur(np.where(valid, depth_m, 0.0).astype(np.float32), 5), dtype=np.float32
+    )
     smooth[~valid | (smooth <= 0)] = np.nan
     sigma = noise_against(smooth, lens, support)
     lumped = replace(support, sigma_m=sigma)
@@ -250,10 +261,10 @@ def _standing_crop(
     lens: Intrinsics,
     support: Support,
     min_height_m: float,
-) -> tuple[Float32Array, npt.NDArray[np.uint8] | None, Intrinsics]:
-    """The part of the picture holding everything that stands on the support, with a margin
-    (what lies round a top is looked at there too), and the lens of that part: the rest is
-    support or nothing, and reading it would only cost time."""
+) -> tuple[Float32Array, npt.NDArray[np.uint8] | None, Intrinsics, tuple[int, int]]:
+    """The part of the picture holding everything that stands on the support, with a margin,
+    its lens and where its first pixel lies in the picture: the rest is support or nothing,
+    and finding tops there would only cost time."""
     rows, cols = depth_m.shape
     with np.errstate(invalid="ignore"):
         standing = (
@@ -263,14 +274,15 @@ def _standing_crop(
     any_row = np.flatnonzero(standing.any(axis=1))
     any_col = np.flatnonzero(standing.any(axis=0))
     if any_row.size == 0:
-        return depth_m[:0, :0], None, lens
+        return depth_m[:0, :0], None, lens, (0, 0)
     r0, r1 = max(any_row[0] - CROP_MARGIN_PX, 0), min(any_row[-1] + CROP_MARGIN_PX + 1, rows)
     c0, c1 = max(any_col[0] - CROP_MARGIN_PX, 0), min(any_col[-1] + CROP_MARGIN_PX + 1, cols)
     if (r0, r1, c0, c1) == (0, rows, 0, cols):
-        return depth_m, colour, lens
+        return depth_m, colour, lens, (0, 0)
     crop = np.ascontiguousarray(depth_m[r0:r1, c0:c1])
     colour_crop = None if colour is None else np.ascontiguousarray(colour[r0:r1, c0:c1])
-    return crop, colour_crop, Intrinsics(lens.fx, lens.fy, lens.cx - c0, lens.cy - r0)
+    lens_crop = Intrinsics(lens.fx, lens.fy, lens.cx - c0, lens.cy - r0)
+    return crop, colour_crop, lens_crop, (int(r0), int(c0))
 
 
 @dataclass(frozen=True)
@@ -297,9 +309,16 @@ class Round:
     """(n,): the share of its four corners something nearer hides."""
 
 
-def _look_round(tops: Tops, depth_m: Float32Array, lens: Intrinsics, support: Support) -> Round:
+def _look_round(
+    tops: Tops,
+    origin: tuple[int, int],
+    depth_m: Float32Array,
+    lens: Intrinsics,
+    support: Support,
+) -> Round:
     """Probe points just past each side of every top, on the top's plane extended: what the
-    camera sees along the ray to each (see :class:`Round`)."""
+    camera sees along the ray to each (see :class:`Round`), in the whole picture (``tops``
+    were found in the part of it whose first pixel is ``origin``)."""
     axis = tops.axis_ab
     perp = np.stack([-axis[:, 1], axis[:, 0]], axis=1)
     half = np.stack([tops.length_m, tops.width_m], axis=1) * 0.5
@@ -333,7 +352,12 @@ def _look_round(tops: Tops, depth_m: Float32Array, lens: Intrinsics, support: Su
     levels = np.concatenate([[0.0], tops.height_m])
     off_level = np.min(np.abs(lower[..., None] - levels), axis=-1) > 2.0 * tolerance
     sloping = (off_level & np.isfinite(lower)).mean(axis=2) >= 0.5
-    seen_top = np.where(inside, tops.labels[vi, ui] - 1, -1)
+    rows, cols = tops.labels.shape
+    vc, uc = vi - origin[0], ui - origin[1]
+    in_crop = inside & (vc >= 0) & (vc < rows) & (uc >= 0) & (uc < cols)
+    seen_top = np.where(
+        in_crop, tops.labels[np.clip(vc, 0, rows - 1), np.clip(uc, 0, cols - 1)] - 1, -1
+    )
     return Round(hidden, lower, cut_off, sloping, seen_top, ab, covered, corners_covered)
 
 
