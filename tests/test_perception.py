@@ -81,8 +81,6 @@ def noisy(depth, noise, seed: int):
 
 
 XFAIL: dict[str, str] = {
-    "640x480": "no box: the 6 cm cube's top is taken as cut off (3 of 4 sides), as the probes "
-    "past its sides (~20 px) fall outside the standing crop's 16 px margin",
     "noise-free, 4 boxes at 2 m": "all 4 found, but one's yaw is 2.3 deg off (bound 1 deg)",
     "1280 x 720, read at every 2nd pixel": "2 of 4 found: the 5.8 x 5.4 x 8.4 and 8.4 x 4.5 x "
     "7.3 cm boxes missed",
@@ -91,10 +89,6 @@ XFAIL: dict[str, str] = {
     "x 0.067 m); seed 1 misses the 16 x 10 x 8 cm carton",
     "cans lying down, lumpy sigma 3 mm": "2-3 of the 4 cans are boxes in each of 3 pictures "
     "(0.132 x 0.044 x 0.037 m in all three)",
-    "boxes on a table, the floor round it": "the 3 boxes right (height within 0.4 mm) but the "
-    "table is a box too: 0.799 x 0.603 x 0.600 m",
-    "an empty table, the floor round it": "the table is a box: 0.791 x 0.595 x 0.600 m",
-    "a top afloat": "a 4 mm slab 25 cm over the table is a box 0.252 m tall",
     "a box nearly covering the one under it": "measured from the table: 0.220 m for 0.125",
     "a box over a smaller one it hides": "measured from the table: 0.160 m for 0.070",
     "a box across a narrower one": "measured from the table: 0.230 m for 0.120",

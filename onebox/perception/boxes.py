@@ -58,6 +58,10 @@ PROBES_PER_SIDE = 9
 """Points looked at just past each side of a top."""
 PROBE_REACH_M = 0.012
 """...this far past it (and at least two pixels): past a smeared edge, within a gap."""
+WALL_FACING = 0.1
+"""A side faces the camera when its outward normal is this far (cosine) toward it."""
+WALL_TOLERANCE_M = 0.012
+"""A point on a side seen this much farther than it lies (or 4 sigma(z)) has nothing there."""
 PLATFORM_COVERED = 0.5
 """A top carrying boxes with more than this share of it hidden is a platform, not a box."""
 SMOOTH_SIGMA_M = 0.01
@@ -232,6 +236,7 @@ def find_boxes(
     base, on = _bases(tops, round_, depth, lens, support)
     # A top that boxes stand on and that is mostly hidden under them is a platform (a pallet's
     # top, a shelf): a level to stand on, not a box to report.
+    is_box &= ~_hollow(tops, round_, base, depth, lens, support)
     carries = np.bincount(on[is_box & (on >= 0)], minlength=len(tops)) > 0
     is_box &= ~(carries & (round_.covered >= PLATFORM_COVERED))
     return Found(
@@ -427,6 +432,57 @@ def _boxes(tops: Tops, round_: Round, settings: FinderSettings) -> BoolArray:
     )
     if not settings.keep_cut_off:
         result &= ~tops.on_border & ~round_.cut_off.any(axis=1)
+    return result
+
+
+def _hollow(
+    tops: Tops,
+    round_: Round,
+    base_m: Float64Array,
+    depth_m: Float32Array,
+    lens: Intrinsics,
+    support: Support,
+) -> BoolArray:
+    """Whether nothing is under a top's edges where a box's sides would be, as under a table
+    on legs or a board on a post: on every side the camera faces (and nothing nearer hides at
+    the top's height), points on the side's plane in the upper quarter between the base and the
+    top are mostly seen farther than they lie. A top none of whose sides the camera sees
+    (straight down, or all hidden) is not hollow."""
+    n = len(tops)
+    axis = tops.axis_ab
+    perp = np.stack([-axis[:, 1], axis[:, 0]], axis=1)
+    outward = np.stack([axis, -axis, perp, -perp], axis=1)  # (n, 4, 2)
+    along = np.stack([perp, perp, axis, axis], axis=1)
+    half = np.stack([tops.length_m, tops.length_m, tops.width_m, tops.width_m], axis=1) / 2
+    half_along = np.stack([tops.width_m, tops.width_m, tops.length_m, tops.length_m], axis=1) / 2
+    spread = np.linspace(-0.6, 0.6, 5)
+    share = np.array([0.75, 0.9])
+    # A pixel in from the side, so the point is on the face whatever the rectangle's rounding.
+    inset = (tops.depth_m / lens.fx)[:, None]
+    ab = (
+        tops.middle_ab[:, None, None, None, :]
+        + (outward * (half - inset)[..., None])[:, :, None, None, :]
+        + (along * half_along[..., None])[:, :, None, None, :] * spread[None, None, None, :, None]
+    )
+    height = (
+        base_m[:, None, None, None]
+        + share[None, None, :, None] * (tops.height_m - base_m)[:, None, None, None]
+    )
+    ab = np.broadcast_to(ab, (n, 4, len(share), len(spread), 2))
+    height = np.broadcast_to(height, (n, 4, len(share), len(spread)))
+    z_expected, seen, inside, _ = _sight(ab, height, tops.basis, depth_m, lens, support)
+    e1, e2, normal = tops.basis
+    out3 = outward[..., :1] * e1 + outward[..., 1:] * e2
+    middle_ab = tops.middle_ab[:, None, :] + outward * half[..., None]
+    lift = (0.5 * (tops.height_m + base_m) - support.offset_camera_m)[:, None, None]
+    middle = middle_ab[..., :1] * e1 + middle_ab[..., 1:] * e2 + lift * normal
+    facing = -(out3 * middle).sum(axis=-1) > WALL_FACING * np.linalg.norm(middle, axis=-1)
+    tolerance = np.maximum(4.0 * tops.sigma_m, WALL_TOLERANCE_M)[:, None, None, None]
+    with np.errstate(invalid="ignore"):
+        farther = (seen > z_expected + tolerance) & inside
+    empty = farther.reshape(n, 4, -1).mean(axis=2) >= 0.5
+    looked = facing & ~round_.hidden
+    result: BoolArray = looked.any(axis=1) & (empty | ~looked).all(axis=1)
     return result
 
 
