@@ -594,7 +594,7 @@ def test_what_is_seen_round_a_top():
     thirds behind a taller one: that side hidden, its width a lower bound."""
     ring = [box_on(P, (i - 1) * 0.25, (j - 1) * 0.25, (0.25, 0.25, 0.2 if i == j == 1 else 0.3),
                    0.0, TAN[(i + j) % 2]) for i in range(3) for j in range(3)]  # fmt: skip
-    behind = box_on(P, 0.0, 0.07, (0.10, 0.30, 0.05), 0.0, (40, 90, 200))
+    behind = box_on(P, 0.0, 0.145, (0.10, 0.30, 0.05), 0.0, (40, 90, 200))
     front = box_on(P, 0.0, -0.04, (0.16, 0.06, 0.25), 0.0, (190, 150, 100))
     for shapes, camera, true, hidden, seen in (
         (ring[4:5], tilted(1.5, 0.0), ring[4], 0, True),

@@ -58,6 +58,10 @@ PROBES_PER_SIDE = 9
 """Points looked at just past each side of a top."""
 PROBE_REACH_M = 0.012
 """...this far past it (and at least two pixels): past a smeared edge, within a gap."""
+FACE_LEVELS = 12
+"""Heights a top's faces are looked at, from its edge down to the support."""
+RECESS_M = 0.1
+"""A face seen ending over a surface less than this behind it overhangs a box."""
 WALL_FACING = 0.1
 """A side faces the camera when its outward normal is this far (cosine) toward it."""
 WALL_TOLERANCE_M = 0.012
@@ -233,10 +237,12 @@ def find_boxes(
     # What lies round the tops is looked at in the whole picture.
     round_ = _look_round(tops, origin, depth, lens, support)
     is_box = _boxes(tops, round_, settings)
-    base, on = _bases(tops, round_, depth, lens, support)
+    looked = _looked_at(tops, round_, lens, support)
+    face_bottom, ledge = _face_bottom(tops, looked, origin, depth, lens, support)
+    base, on = _bases(tops, round_, face_bottom, ledge, depth, lens, support)
     # A top that boxes stand on and that is mostly hidden under them is a platform (a pallet's
     # top, a shelf): a level to stand on, not a box to report.
-    is_box &= ~_hollow(tops, round_, base, depth, lens, support)
+    is_box &= ~_hollow(tops, looked, base, depth, lens, support)
     carries = np.bincount(on[is_box & (on >= 0)], minlength=len(tops)) > 0
     is_box &= ~(carries & (round_.covered >= PLATFORM_COVERED))
     return Found(
@@ -435,20 +441,18 @@ def _boxes(tops: Tops, round_: Round, settings: FinderSettings) -> BoolArray:
     return result
 
 
-def _hollow(
+def _on_sides(
     tops: Tops,
-    round_: Round,
-    base_m: Float64Array,
+    height_m: Float64Array,
     depth_m: Float32Array,
     lens: Intrinsics,
     support: Support,
-) -> BoolArray:
-    """Whether nothing is under a top's edges where a box's sides would be, as under a table
-    on legs or a board on a post: on every side the camera faces (and nothing nearer hides at
-    the top's height), points on the side's plane in the upper quarter between the base and the
-    top are mostly seen farther than they lie. A top none of whose sides the camera sees
-    (straight down, or all hidden) is not hollow."""
-    n = len(tops)
+) -> tuple[Float64Array, Float64Array, BoolArray, tuple[npt.NDArray[np.intp], ...]]:
+    """Points on the planes of each top's four sides (a pixel in from the rectangle, over the
+    middle 60 % of each side) at the heights ``height_m`` (n, H): the depth each would read
+    if seen, the depth seen there, whether it is in the picture, and its pixel (row, column);
+    each (n, 4, H, 5)."""
+    n, levels = height_m.shape
     axis = tops.axis_ab
     perp = np.stack([-axis[:, 1], axis[:, 0]], axis=1)
     outward = np.stack([axis, -axis, perp, -perp], axis=1)  # (n, 4, 2)
@@ -456,39 +460,112 @@ def _hollow(
     half = np.stack([tops.length_m, tops.length_m, tops.width_m, tops.width_m], axis=1) / 2
     half_along = np.stack([tops.width_m, tops.width_m, tops.length_m, tops.length_m], axis=1) / 2
     spread = np.linspace(-0.6, 0.6, 5)
-    share = np.array([0.75, 0.9])
-    # A pixel in from the side, so the point is on the face whatever the rectangle's rounding.
     inset = (tops.depth_m / lens.fx)[:, None]
     ab = (
         tops.middle_ab[:, None, None, None, :]
         + (outward * (half - inset)[..., None])[:, :, None, None, :]
         + (along * half_along[..., None])[:, :, None, None, :] * spread[None, None, None, :, None]
     )
-    height = (
-        base_m[:, None, None, None]
-        + share[None, None, :, None] * (tops.height_m - base_m)[:, None, None, None]
-    )
-    ab = np.broadcast_to(ab, (n, 4, len(share), len(spread), 2))
-    height = np.broadcast_to(height, (n, 4, len(share), len(spread)))
-    z_expected, seen, inside, _ = _sight(ab, height, tops.basis, depth_m, lens, support)
+    ab = np.broadcast_to(ab, (n, 4, levels, len(spread), 2))
+    heights = np.broadcast_to(height_m[:, None, :, None], (n, 4, levels, len(spread)))
+    return _sight(ab, heights, tops.basis, depth_m, lens, support)
+
+
+def _looked_at(tops: Tops, round_: Round, lens: Intrinsics, support: Support) -> BoolArray:
+    """(n, 4): the sides whose faces the camera sees: facing it, and not hidden by something
+    nearer at the top's height."""
+    axis = tops.axis_ab
+    perp = np.stack([-axis[:, 1], axis[:, 0]], axis=1)
+    outward = np.stack([axis, -axis, perp, -perp], axis=1)
+    half = np.stack([tops.length_m, tops.length_m, tops.width_m, tops.width_m], axis=1) / 2
     e1, e2, normal = tops.basis
     out3 = outward[..., :1] * e1 + outward[..., 1:] * e2
     middle_ab = tops.middle_ab[:, None, :] + outward * half[..., None]
-    lift = (0.5 * (tops.height_m + base_m) - support.offset_camera_m)[:, None, None]
+    lift = (0.5 * tops.height_m - support.offset_camera_m)[:, None, None]
     middle = middle_ab[..., :1] * e1 + middle_ab[..., 1:] * e2 + lift * normal
     facing = -(out3 * middle).sum(axis=-1) > WALL_FACING * np.linalg.norm(middle, axis=-1)
+    result: BoolArray = facing & ~round_.hidden
+    return result
+
+
+def _hollow(
+    tops: Tops,
+    looked: BoolArray,
+    base_m: Float64Array,
+    depth_m: Float32Array,
+    lens: Intrinsics,
+    support: Support,
+) -> BoolArray:
+    """Whether nothing is under a top's edges where a box's sides would be, as under a table
+    on legs or a board on a post: on every side whose face the camera sees, points on the
+    side's plane in the upper quarter between the base and the top are mostly seen farther
+    than they lie. A top none of whose faces the camera sees is not hollow."""
+    n = len(tops)
+    share = np.array([0.75, 0.9])
+    heights = base_m[:, None] + share[None, :] * (tops.height_m - base_m)[:, None]
+    z_expected, seen, inside, _ = _on_sides(tops, heights, depth_m, lens, support)
     tolerance = np.maximum(4.0 * tops.sigma_m, WALL_TOLERANCE_M)[:, None, None, None]
     with np.errstate(invalid="ignore"):
         farther = (seen > z_expected + tolerance) & inside
     empty = farther.reshape(n, 4, -1).mean(axis=2) >= 0.5
-    looked = facing & ~round_.hidden
     result: BoolArray = looked.any(axis=1) & (empty | ~looked).all(axis=1)
     return result
+
+
+def _face_bottom(
+    tops: Tops,
+    looked: BoolArray,
+    origin: tuple[int, int],
+    depth_m: Float32Array,
+    lens: Intrinsics,
+    support: Support,
+) -> tuple[Float64Array, BoolArray]:
+    """How far down each top's faces are seen going on from its edge without a break (on the
+    side that shows them lowest): a box's side ends where it stands. NaN where no face is
+    seen. Also whether the face is seen to end there: past it nothing is where the face would
+    go on, or the face of a box under it sticks out (not a top in front, which only hides it)."""
+    n = len(tops)
+    share = 1.0 - np.linspace(0.05, 1.0, FACE_LEVELS)
+    heights = share[None, :] * tops.height_m[:, None]  # top down to the support
+    z_expected, seen, inside, (vi, ui) = _on_sides(tops, heights, depth_m, lens, support)
+    tolerance = np.maximum(4.0 * tops.sigma_m, WALL_TOLERANCE_M)[:, None, None, None]
+    with np.errstate(invalid="ignore"):
+        on_face = (np.abs(seen - z_expected) < tolerance) & inside
+        nearer = (seen < z_expected - tolerance) & inside
+    present = on_face.mean(axis=3) >= 0.5  # (n, 4, levels)
+    run = np.cumprod(present, axis=2).sum(axis=2)  # levels seen from the edge down, unbroken
+    run = np.where(looked, run, 0)
+    side = np.argmax(run, axis=1)
+    deepest = run[np.arange(n), side]
+    bottom = np.where(
+        deepest > 0, share[np.clip(deepest - 1, 0, FACE_LEVELS - 1)] * tops.height_m, np.nan
+    )
+    # What is seen just under the face's end on that side: something nearer that is no top's
+    # (a neighbour's top in front only hides the face; a box's face sticking out carries it).
+    below = np.clip(deepest, 0, FACE_LEVELS - 1)
+    index = (np.arange(n), side, below)
+    rows, cols = tops.labels.shape
+    vc, uc = vi[index] - origin[0], ui[index] - origin[1]
+    in_crop = (vc >= 0) & (vc < rows) & (uc >= 0) & (uc < cols)
+    near_top = cv2.dilate((tops.labels > 0).astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+    on_top = in_crop & near_top[np.clip(vc, 0, rows - 1), np.clip(uc, 0, cols - 1)]
+    gap = seen[index] - z_expected[index]
+    with np.errstate(invalid="ignore"):
+        recessed = (gap > tolerance[:, 0, 0]) & (gap < RECESS_M) & inside[index]
+    # Past the face's end: a box's face a little behind it (it overhangs that box) or
+    # sticking out (it stands on a wider one); a top in front only hides where it goes on,
+    # and past a wide gap nothing is under it (a table's top on legs).
+    ends = recessed | (nearer[index] & ~on_top)
+    ledge = (ends.mean(axis=1) >= 0.5) & (deepest > 0) & (deepest < FACE_LEVELS)
+    looked_any = looked.any(axis=1)
+    return np.where(looked_any, bottom, np.nan), ledge & looked_any
 
 
 def _bases(
     tops: Tops,
     round_: Round,
+    face_bottom_m: Float64Array,
+    ledge: BoolArray,
     depth_m: Float32Array,
     lens: Intrinsics,
     support: Support,
@@ -499,7 +576,10 @@ def _bases(
     rectangle holds its middle (a lower top seen only in a gap). Each is looked for at its own
     height just past the top's sides: a box stands on the level found there on the most probes
     (a box on a wider box finds it all round; a box beside a lower one finds it on one side
-    only, and its own base level on the others). Ties go to the higher level."""
+    only, and its own base level on the others). Ties go to the higher level. A level above
+    where the top's faces are seen to end is none it stands on: its sides go on down past it
+    (a box beside lower ones, seen from the side they do not hide); where the faces end on the
+    face of a box sticking out under them, it stands there."""
     n = len(tops)
     lower = tops.height_m[None, :] < tops.height_m[:, None] - 0.01  # (k top, j lower)
     seen = round_.seen_top.reshape(n, -1)
@@ -511,7 +591,9 @@ def _bases(
     holds = (along <= 0.5 * tops.length_m[None, :]) & (across <= 0.5 * tops.width_m[None, :])
     reach = 0.5 * np.hypot(tops.length_m, tops.width_m) + PROBE_REACH_M
     near = np.hypot(d[..., 0], d[..., 1]) < reach[:, None] + reach[None, :]
-    candidate = lower & ((counts[:, 1:] > 0) | holds | near)
+    step = tops.height_m / FACE_LEVELS + np.maximum(4.0 * tops.sigma_m, WALL_TOLERANCE_M)
+    above_faces = tops.height_m[None, :] > (face_bottom_m + step)[:, None]  # NaN: never
+    candidate = lower & ((counts[:, 1:] > 0) | holds | near) & ~above_faces
     candidate[np.arange(n), np.arange(n)] = False
     # The few highest candidates of each top, then the support.
     width = min(CANDIDATES, n)
@@ -531,9 +613,14 @@ def _bases(
     score[np.isnan(levels)] = -1.0
     score += 1e-3 * np.nan_to_num(levels, nan=0.0)  # ties: the higher
     best = np.argmax(score, axis=1)
-    base = levels[np.arange(n), best]
+    base = np.nan_to_num(levels[np.arange(n), best], nan=0.0)
     on = np.where(best < width, ranked[np.arange(n), np.minimum(best, width - 1)], -1)
-    return np.nan_to_num(base, nan=0.0), on
+    # A face seen to end: the box stands there (on a box whose top it hides, or that is too
+    # small to be a top), unless a level was found there.
+    unmatched = ledge & (np.abs(base - face_bottom_m) > step)
+    base = np.where(unmatched, face_bottom_m, base)
+    on = np.where(unmatched, -1, on)
+    return base, on
 
 
 def _report(
