@@ -89,6 +89,7 @@ def _tape(
     nbins: npt.NDArray[np.int64],
     slot: npt.NDArray[np.int64],
     shade: Float64Array,
+    bin_m: Float64Array,
 ) -> BoolArray:
     """Which strong lines are the edges of tape along a lid: a pair mirrored about the top's
     middle, the strip between them in a shade of its own, the flaps either side in one shade
@@ -122,7 +123,9 @@ def _tape(
     above = mean(last[owner], np.minimum(high + 1, last[owner]))
     flaps_alike = np.abs(above - below) < SHADE_STEP
     strip_apart = np.abs(middle - 0.5 * (above + below)) >= SHADE_STEP
-    result: BoolArray = mirrored & (np.abs(position) > 0) & flaps_alike & strip_apart
+    # A line down the middle is its own mirror: one seam, not a pair.
+    apart = np.abs(position) > 2.0 * bin_m
+    result: BoolArray = mirrored & apart & flaps_alike & strip_apart
     return result
 
 
@@ -195,7 +198,9 @@ def split_at_seams(
             & (ends[1] >= END_SHARE)
         )
         score = np.where(
-            strong & ~_tape(strong, position, owner, offset, nbins, slot, shade), share, 0.0
+            strong & ~_tape(strong, position, owner, offset, nbins, slot, shade, step[owner]),
+            share,
+            0.0,
         )
         peak = np.maximum.reduceat(score, offset)
         where = np.zeros(n, dtype=np.int64)
