@@ -1,15 +1,16 @@
 """Captures per second of the sim's camera, as fast as possible, and where the time goes.
 
-    python benchmarks/bench_sim.py [--captures N] [--no-scenes]
+    python benchmarks/bench_sim.py [--captures N] [--rate-hz R] [--no-scenes]
 
 For 320 x 240 and 1280 x 720 it times, per capture of the main camera: render (drawing the
 scene), read back (both buffers in one call, flipped, depth to metres), encode (two Image
 messages to msgpack) and publish: the two Zenoh puts, depth then colour as the sim sends them,
 from a client of a private router (config/client.json5) to a subscriber in this process, the
 mean and the 95th percentile a capture. "arrives" is the depth picture's put to its callback
-here (p50): a put that returns sooner must not deliver later. Side by side, in the same run,
-MuJoCo's stock ``Renderer`` doing colour and then depth on the same scene, and again with the
-light casting shadows through MuJoCo's default shadow map.
+here (p50): a put that returns sooner must not deliver later. With --rate-hz the captures come
+one a period, as the sim makes them in real time, instead of back to back. Side by side, in
+the same run, MuJoCo's stock ``Renderer`` doing colour and then depth on the same scene, and
+again with the light casting shadows through MuJoCo's default shadow map.
 
 Then (unless --no-scenes), for the seed's world and scene/pallet.toml (640 x 480) and
 scene/clutter.toml (1280 x 720): captures/s without noise and with the d435 and azure_kinect
@@ -42,6 +43,9 @@ from onebox.world.noise import PRESETS, DepthNoise, NoiseSpec
 from onebox.world.render import SceneRenderer
 from schemas import Header, Image, codec
 
+WARM_UP = 10
+"""Captures made before the timing starts: the first warm up caches and the connection."""
+
 
 def stock(settings: scene.SceneSettings, captures: int, shadows: bool) -> float:
     """Captures/s of mujoco.Renderer: a colour render, then a depth render."""
@@ -68,8 +72,10 @@ def ours(
     captures: int,
     endpoint: str,
     noise: NoiseSpec | None = None,
+    rate_hz: float = 0.0,
 ) -> dict[str, float]:
-    """Milliseconds per stage and captures/s of the sim's own pipeline."""
+    """Milliseconds per stage and captures/s of the sim's own pipeline, as fast as possible or,
+    with ``rate_hz``, one capture a period as the sim runs in real time."""
     model = scene.build_model(settings)
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
@@ -90,10 +96,10 @@ def ours(
         with lock:
             if key.endswith("depth/image_raw"):
                 stamp = stamp_ns(sample.payload.to_bytes())
-                if stamp is not None:
+                if stamp is not None and stamp >= WARM_UP:
                     arrived[stamp] = now
-            if len(arrived) >= captures * 0.95:
-                counted.set()
+                    if len(arrived) == captures:
+                        counted.set()
 
     with (
         SceneRenderer(model, [cam]) as renderer,
@@ -105,8 +111,8 @@ def ours(
         depth_pub = pub_bus.publisher("bench/depth/image_raw", Image)
         depth_pub.wait_for_subscribers(timeout_s=5.0)
         encoder = codec(Image)
-        for i in range(captures + 10):
-            if i == 10:  # the first few warm up caches and the connection
+        for i in range(captures + WARM_UP):
+            if i == WARM_UP:  # the first few warm up caches and the connection
                 totals = dict.fromkeys(totals, 0.0)
                 wall = time.perf_counter()
             t0 = time.perf_counter()
@@ -127,12 +133,17 @@ def ours(
             stages = (t1 - t0, t2 - t1, t_noise - t2, t3 - t_noise, t4 - t3)
             for stage, dt in zip(totals, stages, strict=True):
                 totals[stage] += dt
-            if i >= 10:
+            if i >= WARM_UP:
                 starts[i] = t3
                 publish_s.append(t4 - t3)
+            if rate_hz:
+                time.sleep(max(0.0, t0 + 1 / rate_hz - time.perf_counter()))
         rate = captures / (time.perf_counter() - wall)
-        # A subscriber under load may drop some; the count below says how many came.
-        counted.wait(30)
+        # A subscriber under load may drop some: wait until all came or none came for 2 s; the
+        # count below says how many.
+        seen = -1
+        while not counted.wait(2.0) and seen != len(arrived):
+            seen = len(arrived)
         subscriber.undeclare()
     with lock:
         delays = [arrived[i] - t for i, t in starts.items() if i in arrived]
@@ -172,6 +183,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--captures", type=int, default=300)
     parser.add_argument(
+        "--rate-hz",
+        type=float,
+        default=0.0,
+        help="the two sizes at this many captures a second, as the sim runs in real time "
+        "(default 0: as fast as possible); captures/s then says whether it kept up",
+    )
+    parser.add_argument(
         "--no-scenes", action="store_true", help="only the two picture sizes, not the scene files"
     )
     args = parser.parse_args()
@@ -191,7 +209,7 @@ def main() -> None:
         for width, height in ((320, 240), (1280, 720)):
             settings = scene.SceneSettings(width=width, height=height)
             n = args.captures if width <= 640 else max(30, args.captures // 5)
-            r = ours(settings, n, endpoint)
+            r = ours(settings, n, endpoint, rate_hz=args.rate_hz)
             plain = stock(settings, max(20, n // 3), shadows=False)
             shadow = stock(settings, max(10, n // 10), shadows=True)
             print(
