@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import subprocess
 import threading
 from pathlib import Path
@@ -204,6 +205,23 @@ def test_a_process_logs_losing_and_regaining_its_router() -> None:
         assert locator.poll() is None
     finally:
         procs.stop_all()
+
+
+@pytest.mark.parametrize("config", [bus.CLIENT_CONFIG, bus.SECURE_CLIENT_CONFIG])
+def test_a_capture_fits_the_client_queue_pictures_go_on(config: Path) -> None:
+    """Colour and depth of a 320 x 240 capture fit, as 64 KiB batches, in the client's queue of
+    the priority pictures travel on, so the sim's puts return without waiting on the link."""
+    zenoh_config = zenoh.Config.from_file(str(config))
+    # The configuration names a queue as the priority is named: Priority.DATA is "data".
+    priority = next(
+        name
+        for name in ("data_high", "data", "data_low")
+        if getattr(zenoh.Priority, name.upper()) == bus.PICTURE_QOS.priority
+    )
+    size = json.loads(zenoh_config.get_json(f"transport/link/tx/queue/size/{priority}"))
+    batch = json.loads(zenoh_config.get_json("transport/link/tx/batch_size"))
+    capture = 320 * 240 * 3 + 320 * 240 * 4
+    assert size * batch >= capture + batch, (priority, size, batch)
 
 
 def test_clients_that_come_and_go_leave_nothing_in_the_router(router: str) -> None:

@@ -69,6 +69,22 @@ def test_pallet_is_as_described() -> None:
     assert sorted({round(p.top_z, 3) for p in cartons}) == [0.344, 0.444, 0.644]
 
 
+def test_every_top_in_view_at_once_is_each_top_in_view() -> None:
+    """The ground truth's top_in_view, all boxes projected at once, says what in_picture says
+    of each box on its own, tilted cameras and tops half out of the picture included."""
+    answers = []
+    for seed in range(40):
+        desc = random_scene(seed, boxes=8, objects=0)
+        placed = spec.place(desc)
+        for tilt_deg in (0.0, 40.0):
+            cam = dataclasses.replace(desc.camera, tilt_deg=tilt_deg, width=161, height=120)
+            each = [spec.in_picture(cam, p.top_corners()) for p in placed]
+            assert spec.tops_in_picture(cam, placed) == each, (seed, tilt_deg)
+            answers += each
+    assert any(answers) and not all(answers)  # both answers were tried
+    assert spec.tops_in_picture(desc.camera, []) == []
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2, 3, 4])
 def test_random_truth_agrees_with_the_rendered_depth(seed: int) -> None:
     """Every box top lies in the picture; a pixel on a top reads the depth its pose predicts."""

@@ -31,10 +31,10 @@ from onebox.world.spec import (
     SceneDesc,
     TableDesc,
     check,
-    in_picture,
     link_quat,
     place,
     stand,
+    tops_in_picture,
 )
 from schemas import (
     BoxTruth,
@@ -363,16 +363,16 @@ def ground_truth(
 
     ``top_pixels`` are the counts of :func:`visible_top_pixels` on the main camera's
     noise-free depth picture."""
-    placed = place(scene)
+    in_view = tops_in_picture(scene.camera, place(scene))
     boxes = []
-    for i, (box, p) in enumerate(zip(scene.boxes, placed, strict=True)):
+    for i, box in enumerate(scene.boxes):
         pose, geom_id = _geom_pose(model, data, box_name(i))
         boxes.append(
             BoxTruth(
                 pose=pose,
                 size=_vector(2 * model.geom_size[geom_id]),
                 on=box.on,
-                top_in_view=in_picture(scene.camera, p.top_corners()),
+                top_in_view=in_view[i],
                 top_pixels=top_pixels[i],
             )
         )

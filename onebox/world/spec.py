@@ -242,6 +242,22 @@ def in_picture(camera: CameraDesc, points: npt.ArrayLike, margin_px: float = 0.0
     )
 
 
+def tops_in_picture(camera: CameraDesc, placed: list[PlacedBox]) -> list[bool]:
+    """:func:`in_picture` of every box's four top corners, all projected at once."""
+    if not placed:
+        return []
+    corners = np.concatenate([p.top_corners() for p in placed])
+    u, v, z = project(camera, corners).reshape(len(placed), 4, 3).transpose(2, 0, 1)
+    inside = (
+        (z > MIN_RANGE_M)
+        & (u >= -0.5)
+        & (u <= camera.width - 0.5)
+        & (v >= -0.5)
+        & (v <= camera.height - 0.5)
+    )
+    return [bool(b) for b in np.all(inside, axis=1).tolist()]
+
+
 def highest_ray_z(camera: CameraDesc) -> float:
     """The largest upward part of any ray in the picture (negative: every ray looks down)."""
     half_w = (camera.width / 2) / camera.focal_px
