@@ -240,11 +240,21 @@ def find_boxes(
     looked = _looked_at(tops, round_, lens, support)
     face_bottom, ledge = _face_bottom(tops, looked, origin, depth, lens, support)
     base, on = _bases(tops, round_, face_bottom, ledge, depth, lens, support)
-    # A top that boxes stand on and that is mostly hidden under them is a platform (a pallet's
-    # top, a shelf): a level to stand on, not a box to report.
+    # A top that boxes stand on and that they mostly hide, or that several stand on outside its
+    # rectangle (past a side of it something hides), is a platform (a pallet's top, its rim
+    # seen in front of the load): a level to stand on, not a box to report.
     is_box &= ~_hollow(tops, looked, base, depth, lens, support)
-    carries = np.bincount(on[is_box & (on >= 0)], minlength=len(tops)) > 0
-    is_box &= ~(carries & (round_.covered >= PLATFORM_COVERED))
+    carried = is_box & (on >= 0)
+    carries = np.bincount(on[carried], minlength=len(tops)) > 0
+    # ... a box standing on it outside its rectangle stands past a hidden side of it
+    d = tops.middle_ab[carried] - tops.middle_ab[on[carried]]
+    axis = tops.axis_ab[on[carried]]
+    inside = (
+        np.abs(d[:, 0] * axis[:, 0] + d[:, 1] * axis[:, 1]) <= tops.length_m[on[carried]] / 2
+    ) & (np.abs(d[:, 1] * axis[:, 0] - d[:, 0] * axis[:, 1]) <= tops.width_m[on[carried]] / 2)
+    past = np.bincount(on[carried][~inside], minlength=len(tops)) >= 2
+    platform = carries & ((round_.covered >= PLATFORM_COVERED) | past)
+    is_box &= ~platform
     return Found(
         support, _report(tops, round_, is_box, base, on, support, camera_to_world, settings), frame
     )
