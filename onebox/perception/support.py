@@ -41,6 +41,8 @@ SAMPLE_POINTS = 2400
 """Readings the plane is fitted on: enough for a 0.1 % share to hold a couple of points."""
 HYPOTHESES = 64
 """RANSAC planes tried per round; with half the readings on the plane, P(miss) ~ 1e-4."""
+FAR_SHARE = 4.0
+"""Readings farther than this many times the median distance are strays, not the support."""
 MIN_SHARE = 0.10
 """A plane holding less than this share of the readings is not a support candidate."""
 MAX_LUMP_PX = 8.0
@@ -269,6 +271,11 @@ def fit_support(
             share, distance, sigma = 0.0, 1.0, noise_sigma_m or SIGMA_FLOOR_M
         support = support_from_plane(normal_c, offset_c, camera_to_world, share, sigma, distance)
         return replace(support, lump_px=lump_width(depth_m, lens, support))
+    if len(points) < 30:
+        return None
+    # Stray readings far beyond the scene (a stereo camera's mismatches at tens of metres)
+    # would be within any plane's band there, the band growing as z^2: leave them out.
+    points = points[points[:, 2] < FAR_SHARE * np.median(points[:, 2])]
     if len(points) < 30:
         return None
     rng = np.random.default_rng(seed)
