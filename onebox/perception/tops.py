@@ -84,6 +84,8 @@ class Tops:
     """How far the top's points lie off its plane (root mean square)."""
     tilt_deg: Float64Array
     """The top plane's angle to the support."""
+    slope_ab: Float64Array
+    """(n, 2): the top plane's rise along e1 and e2 (height = height_m + slope . offset)."""
     depth_m: Float64Array
     """The top's mean distance along the optical axis."""
     sigma_m: Float64Array
@@ -180,7 +182,16 @@ def join_hidden(
         return None
     tolerance = np.maximum(3.0 * tops.sigma_m, 0.003)
     i, j = np.triu_indices(n, 1)
-    level = np.abs(tops.height_m[i] - tops.height_m[j]) < np.maximum(tolerance[i], tolerance[j])
+    # One plane: each piece's plane, carried on to the other's middle, meets it there (a lid
+    # that leans or bulges is at two heights in two places).
+    apart = tops.middle_ab[j] - tops.middle_ab[i]
+    from_i = tops.height_m[i] + (tops.slope_ab[i] * apart).sum(axis=1)
+    from_j = tops.height_m[j] - (tops.slope_ab[j] * apart).sum(axis=1)
+    misfit = np.minimum(
+        np.abs(tops.height_m[i] - tops.height_m[j]),
+        np.maximum(np.abs(from_i - tops.height_m[j]), np.abs(from_j - tops.height_m[i])),
+    )
+    level = misfit < np.maximum(tolerance[i], tolerance[j])
     i, j = i[level], j[level]
     if i.size == 0:
         return None
@@ -205,7 +216,8 @@ def join_hidden(
     with np.errstate(invalid="ignore"):
         nearer = seen < z - np.maximum(tolerance[i], tolerance[j])[:, None]
     own = (label == i[:, None]) | (label == j[:, None])
-    one = inside.all(axis=1) & (own | nearer).all(axis=1) & nearer.any(axis=1)
+    unread = np.isnan(seen)  # no reading says nothing against
+    one = inside.all(axis=1) & (own | nearer | unread).all(axis=1) & nearer.any(axis=1)
     if not one.any():
         return None
     # Union the joined pairs (a few: a short loop over pairs, not pixels).
@@ -372,6 +384,7 @@ def _measure(
         corners=np.minimum(corners, 1.0),
         rms_m=rms,
         tilt_deg=tilt,
+        slope_ab=np.stack([alpha, beta], axis=1),
         depth_m=mean_z,
         sigma_m=sigma,
         pixels=pixels,
