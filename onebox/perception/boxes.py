@@ -66,8 +66,10 @@ WALL_FACING = 0.1
 """A side faces the camera when its outward normal is this far (cosine) toward it."""
 WALL_TOLERANCE_M = 0.012
 """A point on a side seen this much farther than it lies (or 4 sigma(z)) has nothing there."""
+PLATFORM_CARRIES = 2
+"""A platform carries at least this many boxes..."""
 PLATFORM_COVERED = 0.5
-"""A top carrying boxes with more than this share of it hidden is a platform, not a box."""
+"""...and has more than this share of it hidden, or has them outside its rectangle."""
 SMOOTH_SIGMA_M = 0.01
 """Depth noisier than this at the support is read through a 5 x 5 median first (a camera
 reporting depth in steps of a centimetre, at 0.7 m, is left as it is)."""
@@ -240,12 +242,13 @@ def find_boxes(
     looked = _looked_at(tops, round_, lens, support)
     face_bottom, ledge = _face_bottom(tops, looked, origin, depth, lens, support)
     base, on = _bases(tops, round_, face_bottom, ledge, depth, lens, support)
-    # A top that boxes stand on and that they mostly hide, or that several stand on outside its
-    # rectangle (past a side of it something hides), is a platform (a pallet's top, its rim
-    # seen in front of the load): a level to stand on, not a box to report.
+    # A top that several boxes stand on, and that they mostly hide or that they stand on
+    # outside its rectangle (past a side of it something hides), is a platform (a pallet's
+    # top, its rim seen in front of the load): a level to stand on, not a box to report. A
+    # carton with one box on it is still a carton.
     is_box &= ~_hollow(tops, looked, base, depth, lens, support)
     carried = is_box & (on >= 0)
-    carries = np.bincount(on[carried], minlength=len(tops)) > 0
+    carries = np.bincount(on[carried], minlength=len(tops)) >= PLATFORM_CARRIES
     # ... a box standing on it outside its rectangle stands past a hidden side of it
     d = tops.middle_ab[carried] - tops.middle_ab[on[carried]]
     axis = tops.axis_ab[on[carried]]
