@@ -693,11 +693,6 @@ def test_a_turned_boxs_top_is_measured_as_its_rectangle():
     assert tops.height_m[0] == pytest.approx(0.07, abs=1e-4) and tops.fill[0] > 0.95
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="with the line, 1 top (0.40 x 0.15 m) for the two cartons of one brown at 0.8 m and "
-    "at 1.5 m (two browns meeting at the same line do part: 2 tops)",
-)
 @pytest.mark.parametrize("distance_m", [0.8, 1.5])
 def test_a_thin_dark_line_parts_two_cartons_of_one_height(distance_m):
     """Two cartons of one brown touching end to end: one top in depth; with colour, a dark line

@@ -88,8 +88,8 @@ MIN_WIDTH_M = 0.015
 """A top narrower than this is an edge or a rim, not a box."""
 FLAT_SIGMAS = 3.0
 """A top lies within this many sigma(z) of its plane (root mean square)..."""
-FLAT_M = 0.004
-"""...or within this, whatever the noise (a carton's lid bulges)."""
+FLAT_M = 0.006
+"""...or within this, whatever the noise (a carton's lid bulges and sags by millimetres)."""
 
 
 @dataclass(frozen=True)
