@@ -61,7 +61,10 @@ PROBE_REACH_M = 0.012
 FACE_LEVELS = 12
 """Heights a top's faces are looked at, from its edge down to the support."""
 RECESS_M = 0.1
-"""A face seen ending over a surface less than this behind it overhangs a box."""
+"""A face seen ending over a surface less than this behind it overhangs a box..."""
+STICKING_OUT_M = 0.1
+"""...over one less than this in front of it stands on a wider box; farther off it is
+something else in front (a bottle before a carton)."""
 WALL_FACING = 0.1
 """A side faces the camera when its outward normal is this far (cosine) toward it."""
 WALL_TOLERANCE_M = 0.012
@@ -568,7 +571,9 @@ def _face_bottom(
     # Past the face's end: a box's face a little behind it (it overhangs that box) or
     # sticking out (it stands on a wider one); a top in front only hides where it goes on,
     # and past a wide gap nothing is under it (a table's top on legs).
-    ends = recessed | (nearer[index] & ~on_top)
+    with np.errstate(invalid="ignore"):
+        sticking_out = nearer[index] & ~on_top & (gap > -STICKING_OUT_M)
+    ends = recessed | sticking_out
     ledge = (ends.mean(axis=1) >= 0.5) & (deepest > 0) & (deepest < FACE_LEVELS)
     looked_any = looked.any(axis=1)
     return np.where(looked_any, bottom, np.nan), ledge & looked_any
