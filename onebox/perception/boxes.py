@@ -84,7 +84,7 @@ HIDDEN_SHARE = 0.3
 """A side is hidden when this share of its probes see something nearer than the top."""
 COVER_GRID = 9
 """Points across each side of a top's rectangle looked at for what hides it."""
-CORNER_FILL = 0.7
+CORNER_FILL = 0.6
 """A box's top reaches into its rectangle's corners; a disc, a rounded tin or a bowl's bottom
 does not."""
 MIN_WIDTH_M = 0.015
