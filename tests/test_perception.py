@@ -82,7 +82,6 @@ def noisy(depth, noise, seed: int):
 
 XFAIL: dict[str, str] = {
     "noise-free, 4 boxes at 2 m": "all 4 found, but one's yaw is 2.3 deg off (bound 1 deg)",
-    "a box and a lying cylinder": "the can's top is a box too: 0.201 x 0.042 x 0.018 m",
     "cans lying down, d435": "2 cans lying down are boxes (0.201 x 0.065 x 0.097, 0.222 x 0.053 "
     "x 0.067 m); seed 1 misses the 16 x 10 x 8 cm carton",
     "cans lying down, lumpy sigma 3 mm": "2-3 of the 4 cans are boxes in each of 3 pictures "

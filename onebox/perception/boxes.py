@@ -84,6 +84,12 @@ HIDDEN_SHARE = 0.3
 """A side is hidden when this share of its probes see something nearer than the top."""
 COVER_GRID = 9
 """Points across each side of a top's rectangle looked at for what hides it."""
+CURVED_SHARE = 0.03
+"""A top whose middle half sags from its middle to that half's edges by more than this share
+of their distance is curved (a can lying down: about 0.06; a carton's top, its edges smeared
+by the camera, stays flat in its middle)..."""
+CURVED_SIGMAS = 3.0
+"""...when the sag is also more than this many sigma(z): no curve is read into noise."""
 CORNER_FILL = 0.6
 """A box's top reaches into its rectangle's corners; a disc, a rounded tin or a bowl's bottom
 does not."""
@@ -451,6 +457,7 @@ def _boxes(tops: Tops, round_: Round, settings: FinderSettings) -> BoolArray:
         & (tops.fill >= fill_needed)
         & (tops.corners >= corners_needed)
         & (round_.sloping.sum(axis=1) <= 2)
+        & ~((tops.sag_share > CURVED_SHARE) & (tops.sag_m > CURVED_SIGMAS * tops.sigma_m))
     )
     if not settings.keep_cut_off:
         result &= ~tops.on_border & ~round_.cut_off.any(axis=1)

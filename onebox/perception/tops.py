@@ -82,6 +82,10 @@ class Tops:
     """How full the rectangle's four corner squares are (a fifth of the width on a side)."""
     rms_m: Float64Array
     """How far the top's points lie off its plane (root mean square)."""
+    sag_m: Float64Array
+    """How far the top curves from its middle to its edges, along the axis it curves more..."""
+    sag_share: Float64Array
+    """...and that over its extent along that axis."""
     tilt_deg: Float64Array
     """The top plane's angle to the support."""
     slope_ab: Float64Array
@@ -366,6 +370,31 @@ def _measure(
     length = np.maximum(extent_p, extent_q)
     width = np.minimum(extent_p, extent_q)
     height = mean_h + alpha * (middle[:, 0] - mean_a) + beta * (middle[:, 1] - mean_b)
+    # How the top curves off its plane along each axis: the residuals' quadratic part over the
+    # middle half of the top, as the sag from the middle to that half's edges (a lying can's
+    # crest curves all across; a carton's top whose edges a camera smears drops only at them).
+    sag = np.zeros(n)
+    sag_share = np.zeros(n)
+    for coordinate, mid, extent in ((p, mid_p, extent_p), (q, mid_q, extent_q)):
+        offset = coordinate - mid[top]
+        middle_half = (np.abs(offset) < extent[top] / 4).astype(np.float64)
+        count = np.maximum(np.bincount(top, weights=middle_half, minlength=n), 1.0)
+
+        def inner(
+            v: Float64Array, w: Float64Array = middle_half, c: Float64Array = count
+        ) -> Float64Array:
+            result: Float64Array = np.bincount(top, weights=v * w, minlength=n) / c
+            return result
+
+        square = offset**2
+        centred = square - inner(square)[top]
+        curve = inner(centred * (residual - inner(residual)[top])) / np.maximum(
+            inner(centred * centred), 1e-18
+        )
+        this = np.abs(curve) * (extent / 4) ** 2
+        share = this / np.maximum(extent / 2, 1e-9)
+        sag = np.where(share > sag_share, this, sag)
+        sag_share = np.maximum(sag_share, share)
 
     border = np.zeros_like(labels, dtype=bool)
     border[[0, -1], :] = True
@@ -383,6 +412,8 @@ def _measure(
         fill=fill,
         corners=np.minimum(corners, 1.0),
         rms_m=rms,
+        sag_m=sag,
+        sag_share=sag_share,
         tilt_deg=tilt,
         slope_ab=np.stack([alpha, beta], axis=1),
         depth_m=mean_z,
