@@ -75,26 +75,10 @@ def draw(capture: realdata.RealCapture, scale: int = 2) -> np.ndarray:
         top = pixel(np.asarray(box.top_middle))
         cv2.circle(picture, top, 4, (60, 230, 60), -1, cv2.LINE_AA)
         label = " x ".join(f"{1000 * s:.0f}" for s in box.size) + " mm"
-        cv2.putText(
-            picture,
-            label,
-            (top[0] + 8, top[1] - 8),
-            cv2.FONT_HERSHEY_SIMPLEX,
-            0.7,
-            (0, 0, 0),
-            4,
-            cv2.LINE_AA,
-        )
-        cv2.putText(
-            picture,
-            label,
-            (top[0] + 8, top[1] - 8),
-            cv2.FONT_HERSHEY_SIMPLEX,
-            0.7,
-            (255, 255, 255),
-            2,
-            cv2.LINE_AA,
-        )
+        for ink, thickness in (((0, 0, 0), 4), ((255, 255, 255), 2)):  # outlined text
+            position = (top[0] + 8, top[1] - 8)
+            font = cv2.FONT_HERSHEY_SIMPLEX
+            cv2.putText(picture, label, position, font, 0.7, ink, thickness, cv2.LINE_AA)
     return picture
 
 

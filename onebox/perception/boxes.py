@@ -44,7 +44,7 @@ from onebox.perception.support import (
     noise_against,
 )
 from onebox.perception.surface import height_slope, read_surface
-from onebox.perception.tops import Tops, find_tops
+from onebox.perception.tops import Tops, find_tops, sight
 
 Float32Array = npt.NDArray[np.float32]
 Float64Array = npt.NDArray[np.float64]
@@ -368,7 +368,7 @@ def _look_round(
         + outward[:, :, None, :] * out_len[:, :, None, None]
         + along[:, :, None, :] * (along_len[:, :, None, None] * spread[None, None, :, None])
     )  # (n, 4, P, 2)
-    z_expected, seen, inside, (vi, ui) = _sight(
+    z_expected, seen, inside, (vi, ui) = sight(
         ab, tops.height_m[:, None, None], tops.basis, depth_m, lens, support
     )
     tolerance = np.maximum(3.0 * tops.sigma_m, 0.006)[:, None, None]
@@ -409,38 +409,12 @@ def _covered(
         + (s[None, :, None] * tops.length_m[:, None, None]) * axis[:, None, :]
         + (t[None, :, None] * tops.width_m[:, None, None]) * perp[:, None, :]
     )
-    z_expected, seen, _, _ = _sight(ab, tops.height_m[:, None], tops.basis, depth_m, lens, support)
+    z_expected, seen, _, _ = sight(ab, tops.height_m[:, None], tops.basis, depth_m, lens, support)
     tolerance = np.maximum(3.0 * tops.sigma_m, 0.006)[:, None]
     with np.errstate(invalid="ignore"):
         nearer = seen < z_expected - 4.0 * tolerance
     corner = (np.abs(s) == grid[-1]) & (np.abs(t) == grid[-1])
     return nearer.mean(axis=1), nearer[:, corner].mean(axis=1)
-
-
-def _sight(
-    ab: Float64Array,
-    height_m: Float64Array,
-    basis: Float64Array,
-    depth_m: Float32Array,
-    lens: Intrinsics,
-    support: Support,
-) -> tuple[Float64Array, Float64Array, BoolArray, tuple[npt.NDArray[np.intp], ...]]:
-    """Points at (a, b) in the support plane's coordinates and ``height_m`` above it: the
-    depth each would read if seen, the depth seen at its pixel (NaN outside the picture or no
-    reading), whether it is in the picture, and its pixel (row, column)."""
-    rows, cols = depth_m.shape
-    e1, e2, normal = basis
-    lift = (height_m - support.offset_camera_m)[..., None]
-    point = ab[..., :1] * e1 + ab[..., 1:] * e2 + lift * normal
-    z_expected = point[..., 2]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        u = np.rint(lens.fx * point[..., 0] / z_expected + lens.cx)
-        v = np.rint(lens.fy * point[..., 1] / z_expected + lens.cy)
-    inside = (u >= 0) & (u < cols) & (v >= 0) & (v < rows) & (z_expected > 0)
-    ui = np.where(inside, u, 0).astype(np.intp)
-    vi = np.where(inside, v, 0).astype(np.intp)
-    seen = np.where(inside, depth_m[vi, ui], np.nan).astype(np.float64)
-    return z_expected, seen, inside, (vi, ui)
 
 
 def _boxes(tops: Tops, round_: Round, settings: FinderSettings) -> BoolArray:
@@ -491,7 +465,7 @@ def _on_sides(
     )
     ab = np.broadcast_to(ab, (n, 4, levels, len(spread), 2))
     heights = np.broadcast_to(height_m[:, None, :, None], (n, 4, levels, len(spread)))
-    return _sight(ab, heights, tops.basis, depth_m, lens, support)
+    return sight(ab, heights, tops.basis, depth_m, lens, support)
 
 
 def _looked_at(tops: Tops, round_: Round, lens: Intrinsics, support: Support) -> BoolArray:
@@ -628,7 +602,7 @@ def _bases(
         [np.where(real, tops.height_m[ranked], np.nan), np.zeros((n, 1))], axis=1
     )  # (n, C + 1)
     ab = round_.ab[:, None]  # (n, 1, 4, P, 2)
-    z_expected, seen_z, _, _ = _sight(
+    z_expected, seen_z, _, _ = sight(
         ab, levels[:, :, None, None], tops.basis, depth_m, lens, support
     )
     tolerance = np.maximum(3.0 * tops.sigma_m, 0.006)[:, None, None, None]

@@ -17,41 +17,11 @@ IntArray = npt.NDArray[np.int32]
 
 @numba.njit(cache=True, nogil=True)
 def extents_at_angles(
-    label: IntArray, a: Float64Array, b: Float64Array, count: int, angles: Float64Array
-) -> Float64Array:
-    """For each top and each angle, the extents of its points along the two axes turned by
-    that angle: shape (count, len(angles), 4) = (min along, max along, min across, max
-    across)."""
-    n_angles = angles.shape[0]
-    out = np.empty((count, n_angles, 4))
-    out[:, :, 0] = np.inf
-    out[:, :, 1] = -np.inf
-    out[:, :, 2] = np.inf
-    out[:, :, 3] = -np.inf
-    cos = np.cos(angles)
-    sin = np.sin(angles)
-    for i in range(label.shape[0]):
-        k = label[i]
-        for j in range(n_angles):
-            p = a[i] * cos[j] + b[i] * sin[j]
-            q = b[i] * cos[j] - a[i] * sin[j]
-            row = out[k, j]
-            if p < row[0]:
-                row[0] = p
-            if p > row[1]:
-                row[1] = p
-            if q < row[2]:
-                row[2] = q
-            if q > row[3]:
-                row[3] = q
-    return out
-
-
-@numba.njit(cache=True, nogil=True)
-def extents_at_own_angles(
     label: IntArray, a: Float64Array, b: Float64Array, angles: Float64Array
 ) -> Float64Array:
-    """As :func:`extents_at_angles`, each top at angles of its own: ``angles`` is (count, m)."""
+    """For each top and each of its angles (``angles`` is (count, m): each top's own), the
+    extents of its points along the two axes turned by that angle: shape (count, m, 4) = (min
+    along, max along, min across, max across)."""
     count, n_angles = angles.shape
     out = np.empty((count, n_angles, 4))
     out[:, :, 0] = np.inf
@@ -151,8 +121,7 @@ def warm_up() -> None:
     """Compile (or load from the cache) every kernel on a tiny input."""
     label = np.zeros(2, dtype=np.int32)
     a = np.array([0.0, 1.0])
-    extents_at_angles(label, a, a, 1, np.array([0.0, 0.5]))
-    extents_at_own_angles(label, a, a, np.array([[0.0, 0.5]]))
+    extents_at_angles(label, a, a, np.array([[0.0, 0.5]]))
     extents(label, a, a, 1)
     grid = np.zeros((2, 2), dtype=np.int32)
     grid[0, 0] = 1

@@ -199,24 +199,13 @@ def join_hidden(
     i, j = i[level], j[level]
     if i.size == 0:
         return None
-    rows, cols = depth_m.shape
     share = np.linspace(0.0, 1.0, JOIN_SAMPLES)
     ab = tops.middle_ab[i, None, :] + share[None, :, None] * (
         tops.middle_ab[j, None, :] - tops.middle_ab[i, None, :]
     )
     height = 0.5 * (tops.height_m[i] + tops.height_m[j])
-    e1, e2, normal = tops.basis
-    lift = (height - support.offset_camera_m)[:, None, None]
-    point = ab[..., :1] * e1 + ab[..., 1:] * e2 + lift * normal
-    z = point[..., 2]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        u = np.rint(lens.fx * point[..., 0] / z + lens.cx)
-        v = np.rint(lens.fy * point[..., 1] / z + lens.cy)
-    inside = (u >= 0) & (u < cols) & (v >= 0) & (v < rows) & (z > 0)
-    ui = np.where(inside, u, 0).astype(np.intp)
-    vi = np.where(inside, v, 0).astype(np.intp)
+    z, seen, inside, (vi, ui) = sight(ab, height[:, None], tops.basis, depth_m, lens, support)
     label = tops.labels[vi, ui] - 1
-    seen = depth_m[vi, ui]
     with np.errstate(invalid="ignore"):
         nearer = seen < z - np.maximum(tolerance[i], tolerance[j])[:, None]
     own = (label == i[:, None]) | (label == j[:, None])
@@ -239,6 +228,32 @@ def join_hidden(
     lookup = np.concatenate([[0], compact + 1]).astype(np.int32)
     result: IntArray = lookup[tops.labels]
     return result
+
+
+def sight(
+    ab: Float64Array,
+    height_m: Float64Array,
+    basis: Float64Array,
+    depth_m: Float32Array,
+    lens: Intrinsics,
+    support: Support,
+) -> tuple[Float64Array, Float64Array, BoolArray, tuple[npt.NDArray[np.intp], ...]]:
+    """Points at (a, b) in the support plane's coordinates and ``height_m`` above it: the
+    depth each would read if seen, the depth seen at its pixel (NaN outside the picture or no
+    reading), whether it is in the picture, and its pixel (row, column)."""
+    rows, cols = depth_m.shape
+    e1, e2, normal = basis
+    lift = (height_m - support.offset_camera_m)[..., None]
+    point = ab[..., :1] * e1 + ab[..., 1:] * e2 + lift * normal
+    z_expected = point[..., 2]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = np.rint(lens.fx * point[..., 0] / z_expected + lens.cx)
+        v = np.rint(lens.fy * point[..., 1] / z_expected + lens.cy)
+    inside = (u >= 0) & (u < cols) & (v >= 0) & (v < rows) & (z_expected > 0)
+    ui = np.where(inside, u, 0).astype(np.intp)
+    vi = np.where(inside, v, 0).astype(np.intp)
+    seen = np.where(inside, depth_m[vi, ui], np.nan).astype(np.float64)
+    return z_expected, seen, inside, (vi, ui)
 
 
 @dataclass(frozen=True)
@@ -316,11 +331,16 @@ def _measure(
     )
     on_edge = edge.ravel()[pts.index]
     # Coarse, then fine about the best.
-    spans = kernels.extents_at_angles(top[on_edge], a[on_edge], b[on_edge], n, ANGLES)
+    spans = kernels.extents_at_angles(
+        top[on_edge],
+        a[on_edge],
+        b[on_edge],
+        np.ascontiguousarray(np.broadcast_to(ANGLES, (n, len(ANGLES)))),
+    )
     areas = (spans[:, :, 1] - spans[:, :, 0]) * (spans[:, :, 3] - spans[:, :, 2])
     coarse = ANGLES[np.argmin(np.where(np.isfinite(areas), areas, np.inf), axis=1)]
     fine = coarse[:, None] + FINE_ANGLES[None, :]
-    spans = kernels.extents_at_own_angles(top[on_edge], a[on_edge], b[on_edge], fine)
+    spans = kernels.extents_at_angles(top[on_edge], a[on_edge], b[on_edge], fine)
     areas = (spans[:, :, 1] - spans[:, :, 0]) * (spans[:, :, 3] - spans[:, :, 2])
     best = np.argmin(np.where(np.isfinite(areas), areas, np.inf), axis=1)
     angle = fine[np.arange(n), best]
