@@ -18,11 +18,21 @@ The pipeline, one module a physical effect:
 3. :mod:`~onebox.perception.tops`: connected flat regions facing up, split where a seam seen
    only in colour crosses them (:mod:`~onebox.perception.seams`), each measured as an oriented
    rectangle on its own plane.
-4. Here: what lies round each top (:func:`_look_round`): something nearer hiding a side (the
-   extent along that side is then a lower bound), a lower level, or nothing seen; what each
-   top stands on (the highest lower top under its middle, else the support); which tops are
-   boxes (flat, level, filling their rectangle: round, curved and ragged things do not); and
-   the report.
+4. Here:
+
+   - what lies round each top (:func:`_look_round`): something nearer hiding a side (the
+     extent along that side is then a lower bound), a lower level, the picture's edge, and how
+     much of its rectangle is not seen;
+   - which tops are boxes (:func:`_boxes`): large enough, level, flat, not curved over their
+     middle half, filling their rectangle and its corners (of what is seen), not cut off, not
+     falling away on more than two sides;
+   - what each top stands on (:func:`_bases`): the support or a lower top, looked for at its
+     own height just past the top's sides, within where the top's faces are seen to end
+     (:func:`_face_bottom`), or where they end on a box sticking out under them;
+   - what is no box after all: a top with nothing under its edges (:func:`_hollow`, a table on
+     legs) and a platform (a top two boxes or more stand on that they mostly hide, or that
+     they stand on past a hidden side of it: a pallet's top and rim);
+   - the report, with a catalogue's height and name where a top fits an entry.
 """
 
 from __future__ import annotations

@@ -4,26 +4,29 @@ rectangle.
 Contract: :func:`find_tops` takes the depth picture, its :class:`~onebox.perception.surface.
 Surface` reading, the lens, the support, optionally the colour picture (registered with the
 depth) and the finder's settings, and returns :class:`Tops`: one row per top, every top measured
-at once. No I/O, no loop over pixels or over tops in Python.
+at once. No I/O, no loop over pixels or over tops in Python (the pairs of pieces joined are
+unioned in a short loop over the pairs).
 
 How:
 
 1. **Standing pixels facing up**: higher than ``min_height_m`` and 4 sigma(z) above the
    support, facing up (:mod:`onebox.perception.surface`), not on a depth step. An opening
    (3 x 3) takes off single pixels and spurs a pixel wide (flying pixels, stereo streaks).
-2. **Connected regions** of them (4-connected, OpenCV), the pixels cut at steps grown back
-   into the region beside them when at its local height (twice: a step cuts a pixel either
-   side).
-3. **Seams seen only in colour**: two touching cartons of one height are one region in depth;
+2. **Connected regions** of them (4-connected, OpenCV), the pixels cut at steps or whose
+   normals the smoothing turned grown back into the region beside them when at its height
+   (:func:`onebox.perception.kernels.grow`, a few pixels).
+3. **Pieces of one top joined** (:func:`join_hidden`) where something nearer cut them apart and
+   their planes meet.
+4. **Seams seen only in colour**: two touching cartons of one height are one region in depth;
    the thin dark line between them (or a colour edge) runs straight across the region from
    side to side, which print and labels do not. Every region is split where such a line
    crosses it (:mod:`onebox.perception.seams`) and measured again.
-4. **Each top measured**: its plane (least squares on its points, in the support's
+5. **Each top measured**: its plane (least squares on its points, in the support's
    coordinates), its oriented rectangle (the angle whose rectangle round the region's outline
    is smallest; the extent along each axis taken over the pixels whose cross-section is at
    least ``PROFILE_SHARE`` of a typical one, so a ragged or smeared edge's stray pixels do not
-   stretch it), its area (each pixel's footprint on the plane), how full its rectangle is and
-   how flat it is.
+   stretch it), its area (each pixel's footprint on the plane), how full its rectangle and its
+   corners are, how flat it is and how its middle half curves.
 """
 
 from __future__ import annotations
