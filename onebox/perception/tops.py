@@ -451,12 +451,12 @@ def _within_profile(
     top: IntArray, coordinate: Float64Array, step: Float64Array, n: int
 ) -> BoolArray:
     """Whether each pixel's cross-section along ``coordinate`` (bins a pixel wide) holds at
-    least PROFILE_SHARE of its top's fullest."""
-    start = np.full(n, np.inf)
-    np.minimum.at(start, top, coordinate)
+    least PROFILE_SHARE of its top's typical one."""
+    span = kernels.extents(top, coordinate, coordinate, n)
+    start, end = span[:, 0], span[:, 1]
     bins = np.floor((coordinate - start[top]) / step[top]).astype(np.int64)
-    width = np.zeros(n, dtype=np.int64)
-    np.maximum.at(width, top, bins + 1)
+    with np.errstate(invalid="ignore"):
+        width = np.where(np.isfinite(end), np.floor((end - start) / step) + 1, 0).astype(np.int64)
     offset = np.concatenate([[0], np.cumsum(width)[:-1]])
     slot = offset[top] + bins
     counts = np.bincount(slot, minlength=int(width.sum()))
