@@ -18,7 +18,8 @@ Writes:
                           measured: one Detection3D a box, topmost first (class "box", bbox
                           centre and orientation, size = length >= width, height in metres,
                           score = how much of its top is a flat rectangle, id stable while the
-                          box does not move), or none when no box is in view
+                          box does not move, hidden_sides and height_seen; with --catalogue a
+                          second class, the entry the box fits), or none when no box is in view
   support                 SupportPlane: the surface the boxes stand on (normal, offset, inlier
                           share, tilt from the world's up)
 Both are in world_frame; with no pose at all (--pose-source none, or no tf_static within a few
