@@ -700,7 +700,7 @@ def _report(
             )
         )
     if len(result) != len(order):
-        result = [Box(**{**b.__dict__, "on": None}) for b in result]
+        result = [replace(b, on=None) for b in result]
     return result
 
 

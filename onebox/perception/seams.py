@@ -129,28 +129,15 @@ def _tape(
     return result
 
 
-def split_at_seams(
-    tops: Tops,
-    seam: BoolArray,
-    grey: npt.NDArray[np.uint8],
-    depth_m: npt.NDArray[np.float32],
-    lens: Intrinsics,
-) -> IntArray | None:
+def split_at_seams(tops: Tops, seam: BoolArray, grey: npt.NDArray[np.uint8]) -> IntArray | None:
     """New labels with every top cut at the seam that crosses it best, or None."""
     labels = tops.labels
-    index = np.flatnonzero(labels)
+    index, top = tops.points.index, tops.points.top
     if index.size == 0:
         return None
-    top = labels.ravel()[index] - 1
     n = len(tops)
-    cols = labels.shape[1]
-    r, c = np.divmod(index, cols)
-    z = depth_m.ravel()[index].astype(np.float64)
-    x = (c - lens.cx) / lens.fx * z
-    y = (r - lens.cy) / lens.fy * z
-    e1, e2 = tops.basis[0], tops.basis[1]
-    a = e1[0] * x + e1[1] * y + e1[2] * z - tops.middle_ab[top, 0]
-    b = e2[0] * x + e2[1] * y + e2[2] * z - tops.middle_ab[top, 1]
+    a = tops.points.a - tops.middle_ab[top, 0]
+    b = tops.points.b - tops.middle_ab[top, 1]
     ax = tops.axis_ab[top]
     along = a * ax[:, 0] + b * ax[:, 1]
     across = b * ax[:, 0] - a * ax[:, 1]

@@ -102,6 +102,8 @@ class Tops:
     """Touches the picture's border: cut off, its extent unknown."""
     basis: Float64Array
     """(3, 3): e1, e2 and the support normal, rows, in the optical frame."""
+    points: Points
+    """The pixels the tops were measured from, in the support plane's coordinates."""
 
     def __len__(self) -> int:
         return len(self.height_m)
@@ -168,7 +170,7 @@ def find_tops(
     if seam is None:
         return tops
     for _ in range(SEAM_ROUNDS):
-        split = seams.split_at_seams(tops, seam[0], seam[1], depth_m, lens)
+        split = seams.split_at_seams(tops, seam[0], seam[1])
         if split is None:
             break
         tops = _measure(split, depth_m, surface, lens, basis)
@@ -444,6 +446,7 @@ def _measure(
         pixels=pixels,
         on_border=on_border,
         basis=basis,
+        points=pts,
     )
 
 
