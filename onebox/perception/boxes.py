@@ -587,8 +587,9 @@ def _bases(
     (a box on a wider box finds it all round; a box beside a lower one finds it on one side
     only, and its own base level on the others). Ties go to the higher level. A level above
     where the top's faces are seen to end is none it stands on: its sides go on down past it
-    (a box beside lower ones, seen from the side they do not hide); where the faces end on the
-    face of a box sticking out under them, it stands there."""
+    (a box beside lower ones, seen from the side they do not hide), and a level found where
+    the faces end wins (a box on one a little wider, whose top shows past few probes); where
+    the faces end on the face of a box sticking out under them, it stands there."""
     n = len(tops)
     lower = tops.height_m[None, :] < tops.height_m[:, None] - 0.01  # (k top, j lower)
     seen = round_.seen_top.reshape(n, -1)
@@ -620,6 +621,9 @@ def _bases(
         found = np.abs(seen_z - z_expected) < tolerance
     score = found.reshape(n, width + 1, -1).sum(axis=2).astype(np.float64)
     score[np.isnan(levels)] = -1.0
+    # The level its faces are seen to end on, found past a side, is what it stands on.
+    at_face = (np.abs(levels - face_bottom_m[:, None]) < step[:, None]) & (score > 0)
+    score += 1000.0 * at_face
     score += 1e-3 * np.nan_to_num(levels, nan=0.0)  # ties: the higher
     best = np.argmax(score, axis=1)
     base = np.nan_to_num(levels[np.arange(n), best], nan=0.0)
