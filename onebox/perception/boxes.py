@@ -621,8 +621,10 @@ def _bases(
         found = np.abs(seen_z - z_expected) < tolerance
     score = found.reshape(n, width + 1, -1).sum(axis=2).astype(np.float64)
     score[np.isnan(levels)] = -1.0
-    # The level its faces are seen to end on, found past a side, is what it stands on.
-    at_face = (np.abs(levels - face_bottom_m[:, None]) < step[:, None]) & (score > 0)
+    # The level its faces are seen to end on, found past two sides or more, is what it stands
+    # on (a box beside a lower one finds that one past a single side).
+    sides = found.any(axis=3).sum(axis=2)
+    at_face = (np.abs(levels - face_bottom_m[:, None]) < step[:, None]) & (sides >= 2)
     score += 1000.0 * at_face
     score += 1e-3 * np.nan_to_num(levels, nan=0.0)  # ties: the higher
     best = np.argmax(score, axis=1)
