@@ -58,6 +58,8 @@ MIN_PIXELS = 12
 """Fewer pixels than this are no top (speckles), whatever their footprint."""
 JOIN_SAMPLES = 24
 """Points looked at between two pieces of a top that something nearer may have cut apart."""
+PINCHED_PX = 8.0
+"""A top narrower than this many pixels is pinched in two where its edges' steps narrow it."""
 SEAM_ROUNDS = 3
 """Splitting at seams and measuring again, at most this often (a seam that crosses one part
 only shows once the other is split off)."""
@@ -215,7 +217,13 @@ def join_hidden(
         nearer = seen < z - np.maximum(tolerance[i], tolerance[j])[:, None]
     own = (label == i[:, None]) | (label == j[:, None])
     unread = np.isnan(seen)  # no reading says nothing against
-    one = inside.all(axis=1) & (own | nearer | unread).all(axis=1) & nearer.any(axis=1)
+    # ... or, a few pixels wide, they touch all the way (pinched in two by the opening).
+    narrow = tops.width_m * lens.fx / tops.depth_m < PINCHED_PX
+    one = (
+        inside.all(axis=1)
+        & (own | nearer | unread).all(axis=1)
+        & (nearer.any(axis=1) | (own.all(axis=1) & narrow[i] & narrow[j]))
+    )
     if not one.any():
         return None
     # Union the joined pairs (a few: a short loop over pairs, not pixels).
