@@ -94,12 +94,16 @@ HIDDEN_SHARE = 0.3
 """A side is hidden when this share of its probes see something nearer than the top."""
 COVER_GRID = 9
 """Points across each side of a top's rectangle looked at for what hides it."""
-CURVED_SHARE = 0.03
+CURVED_SHARE = 0.06
 """A top whose middle half sags from its middle to that half's edges by more than this share
-of their distance is curved (a can lying down: about 0.06; a carton's top, its edges smeared
-by the camera, stays flat in its middle)..."""
+of their distance is curved (a can lying down: about 0.06 and more; a carton's lid, bowed by
+a stereo camera, up to 0.05; its edges smeared by the camera, it stays flat in its middle)..."""
 CURVED_SIGMAS = 3.0
-"""...when the sag is also more than this many sigma(z): no curve is read into noise."""
+"""...when the sag is also more than this many times its own noise: no curve is read into
+noise."""
+SAG_SPREAD = 3.35
+"""A quadratic fitted to N points spread evenly over [-a, a] has its rise over a known to
+sigma * 3.35 / sqrt(N)."""
 CORNER_FILL = 0.6
 """A box's top reaches into its rectangle's corners; a disc, a rounded tin or a bowl's bottom
 does not."""
@@ -257,7 +261,7 @@ def find_boxes(
         return Found(support, [], frame)
     # What lies round the tops is looked at in the whole picture.
     round_ = _look_round(tops, origin, depth, lens, support)
-    is_box = _boxes(tops, round_, settings)
+    is_box = _boxes(tops, round_, settings, support.lump_px)
     looked = _looked_at(tops, round_, lens, support)
     face_bottom, ledge = _face_bottom(tops, looked, origin, depth, lens, support)
     base, on = _bases(tops, round_, face_bottom, ledge, depth, lens, support)
@@ -427,12 +431,16 @@ def _covered(
     return nearer.mean(axis=1), nearer[:, corner].mean(axis=1)
 
 
-def _boxes(tops: Tops, round_: Round, settings: FinderSettings) -> BoolArray:
+def _boxes(tops: Tops, round_: Round, settings: FinderSettings, lump_px: float) -> BoolArray:
     """Which tops are boxes' (see the module docstring)."""
     # What something nearer hides cannot be filled: ask for the rest.
     fill_needed = settings.min_score * (1.0 - round_.covered)
     corners_needed = CORNER_FILL * (1.0 - round_.corners_covered)
     flat = tops.rms_m <= np.maximum(FLAT_SIGMAS * tops.sigma_m, FLAT_M)
+    # The sag is fitted to the middle half's pixels: its noise falls with the root of how
+    # many independent lumps of noise that half holds.
+    lumps = np.maximum(0.5 * tops.pixels / max(lump_px, 1.0) ** 2, 1.0)
+    sag_noise = np.minimum(tops.sigma_m, SAG_SPREAD * tops.sigma_m / np.sqrt(lumps))
     result: BoolArray = (
         (tops.area_m2 >= settings.min_top_area_m2)
         & (tops.width_m >= MIN_WIDTH_M)
@@ -441,7 +449,7 @@ def _boxes(tops: Tops, round_: Round, settings: FinderSettings) -> BoolArray:
         & (tops.fill >= fill_needed)
         & (tops.corners >= corners_needed)
         & (round_.sloping.sum(axis=1) <= 2)
-        & ~((tops.sag_share > CURVED_SHARE) & (tops.sag_m > CURVED_SIGMAS * tops.sigma_m))
+        & ~((tops.sag_share > CURVED_SHARE) & (tops.sag_m > CURVED_SIGMAS * sag_noise))
     )
     if not settings.keep_cut_off:
         result &= ~tops.on_border & ~round_.cut_off.any(axis=1)
