@@ -193,14 +193,22 @@ def join_hidden(
         return None
     tolerance = np.maximum(3.0 * tops.sigma_m, 0.003)
     i, j = np.triu_indices(n, 1)
-    # One plane: each piece's plane, carried on to the other's middle, meets it there (a lid
-    # that leans or bulges is at two heights in two places).
-    apart = tops.middle_ab[j] - tops.middle_ab[i]
-    from_i = tops.height_m[i] + (tops.slope_ab[i] * apart).sum(axis=1)
-    from_j = tops.height_m[j] - (tops.slope_ab[j] * apart).sum(axis=1)
+    # One plane: the larger piece's plane, carried on to the smaller's points, meets them
+    # there on average (a small piece's own plane leans with its smeared edges; a lid that
+    # leans or bulges is at two heights in two places).
+    pts = tops.points
+    count = np.maximum(np.bincount(pts.top, minlength=n), 1)
+    centroid = np.stack(
+        [np.bincount(pts.top, weights=v, minlength=n) / count for v in (pts.a, pts.b, pts.h)],
+        axis=1,
+    )
+    large = np.where(tops.pixels[i] >= tops.pixels[j], i, j)
+    small = i + j - large
+    carried = tops.height_m[large] + (
+        tops.slope_ab[large] * (centroid[small, :2] - tops.middle_ab[large])
+    ).sum(axis=1)
     misfit = np.minimum(
-        np.abs(tops.height_m[i] - tops.height_m[j]),
-        np.maximum(np.abs(from_i - tops.height_m[j]), np.abs(from_j - tops.height_m[i])),
+        np.abs(carried - centroid[small, 2]), np.abs(tops.height_m[i] - tops.height_m[j])
     )
     level = misfit < np.maximum(tolerance[i], tolerance[j])
     i, j = i[level], j[level]
