@@ -84,8 +84,10 @@ PLATFORM_CARRIES = 2
 PLATFORM_COVERED = 0.5
 """...and has more than this share of it hidden, or has them outside its rectangle."""
 SMOOTH_SIGMA_M = 0.01
-"""Depth noisier than this at the support is read through a 5 x 5 median first (a camera
-reporting depth in steps of a centimetre, at 0.7 m, is left as it is)."""
+"""Depth noisier than this at the support is read through a median first (a camera
+reporting depth in steps of a centimetre, at 0.7 m, is left as it is)..."""
+MEDIAN_PX = 5
+"""...of this many pixels a side."""
 CROP_MARGIN_PX = 16
 """Pixels kept round everything standing, for what is looked at just past a top's sides."""
 CANDIDATES = 4
@@ -103,7 +105,9 @@ CURVED_SIGMAS = 3.0
 noise."""
 SAG_SPREAD = 3.35
 """A quadratic fitted to N points spread evenly over [-a, a] has its rise over a known to
-sigma * 3.35 / sqrt(N)."""
+sigma * 3.35 / sqrt(N)..."""
+SAG_FLOOR = 0.35
+"""...but a top's fitted sag is never taken as surer than this share of sigma(z)."""
 CORNER_FILL = 0.6
 """A box's top reaches into its rectangle's corners; a disc, a rounded tin or a bowl's bottom
 does not."""
@@ -240,8 +244,10 @@ def find_boxes(
         )
     if support is None:
         return Found(None, [], frame)
+    lump_px = support.lump_px
     if settings.noise_sigma_m is None and support.sigma_m > SMOOTH_SIGMA_M:
         depth, support = _smoothed(depth, lens, support)
+        lump_px = max(support.lump_px, MEDIAN_PX)  # the median's window makes the noise lumpy
     crop, colour_crop, crop_lens, origin = _standing_crop(
         depth, colour, lens, support, settings.min_height_m
     )
@@ -261,7 +267,7 @@ def find_boxes(
         return Found(support, [], frame)
     # What lies round the tops is looked at in the whole picture.
     round_ = _look_round(tops, origin, depth, lens, support)
-    is_box = _boxes(tops, round_, settings, support.lump_px)
+    is_box = _boxes(tops, round_, settings, lump_px)
     looked = _looked_at(tops, round_, lens, support)
     face_bottom, ledge = _face_bottom(tops, looked, origin, depth, lens, support)
     base, on = _bases(tops, round_, face_bottom, ledge, depth, lens, support)
@@ -294,7 +300,8 @@ def _smoothed(
     measured again on the support."""
     valid = np.isfinite(depth_m)
     smooth: Float32Array = np.asarray(
-        cv2.medianBlur(np.where(valid, depth_m, 0.0).astype(np.float32), 5), dtype=np.float32
+        cv2.medianBlur(np.where(valid, depth_m, 0.0).astype(np.float32), MEDIAN_PX),
+        dtype=np.float32,
     )
     smooth[~valid | (smooth <= 0)] = np.nan
     sigma = noise_against(smooth, lens, support)
@@ -438,9 +445,10 @@ def _boxes(tops: Tops, round_: Round, settings: FinderSettings, lump_px: float) 
     corners_needed = CORNER_FILL * (1.0 - round_.corners_covered)
     flat = tops.rms_m <= np.maximum(FLAT_SIGMAS * tops.sigma_m, FLAT_M)
     # The sag is fitted to the middle half's pixels: its noise falls with the root of how
-    # many independent lumps of noise that half holds.
+    # many independent lumps of noise that half holds, down to a share of sigma(z) (depth
+    # errors keep some structure across a top that no count of pixels averages out).
     lumps = np.maximum(0.5 * tops.pixels / max(lump_px, 1.0) ** 2, 1.0)
-    sag_noise = np.minimum(tops.sigma_m, SAG_SPREAD * tops.sigma_m / np.sqrt(lumps))
+    sag_noise = np.clip(SAG_SPREAD / np.sqrt(lumps), SAG_FLOOR, 1.0) * tops.sigma_m
     result: BoolArray = (
         (tops.area_m2 >= settings.min_top_area_m2)
         & (tops.width_m >= MIN_WIDTH_M)
