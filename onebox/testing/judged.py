@@ -2,9 +2,11 @@
 against it: what the accuracy benchmark prints and the scene tests assert.
 
 A detection is paired with the true box whose top's middle is nearest its top's middle (within
-half the true top's smaller side, at least 2 cm). A box whose whole top is in the picture and
-seen (at least 95 % of its top's pixels see it, not hidden under another box) and that nothing
-detected is "missed"; a detection near no true top is "false". A box partly hidden under
+half the true top's smaller side, at least 2 cm), or, for a box whose top is not all seen, with
+its middle on that top (the part seen, as the real captures' rule has it for a partial box). A
+box whose whole top is in the picture and seen (at least 95 % of its top's pixels see it, not
+hidden under another box) and that nothing detected is "missed"; a detection near no true top
+is "false". A box partly hidden under
 another counts neither way for its size, since the camera cannot see its whole top, but its
 height is judged; a platform (a true box that two or more others stand on, such as a pallet)
 is not judged at all.
@@ -96,6 +98,19 @@ class Judged:
     notes: list[str] = field(default_factory=list)
 
 
+def _on_top_of(point: np.ndarray, box: BoxTruth) -> bool:
+    """Whether a point lies on a true box's top: inside its rectangle (1 cm spare) and within
+    2 cm of its height."""
+    p, q = box.pose.position, box.pose.orientation
+    rotation = spec.quat_matrix((q.w, q.x, q.y, q.z))
+    local = rotation.T @ (point - np.array([p.x, p.y, p.z]))
+    return bool(
+        abs(local[0]) <= box.size.x / 2 + 0.01
+        and abs(local[1]) <= box.size.y / 2 + 0.01
+        and abs(local[2] - box.size.z / 2) <= 0.02
+    )
+
+
 def yaw_of(rotation: np.ndarray) -> float:
     """The length axis's angle about world z, degrees."""
     return math.degrees(math.atan2(rotation[1, 0], rotation[0, 0]))
@@ -135,7 +150,11 @@ def judge(found: Found, rendered: Rendered, judged: Judged) -> None:
             if nearest < 0
             else max(0.02, 0.5 * min(boxes[nearest].size.x, boxes[nearest].size.y))
         )
+        # ... or the part seen of a box whose top is not all seen, its middle on that top
+        on = [i for i in sorted(unjudged - used) if _on_top_of(top, boxes[i])]
         if nearest < 0 or distances[nearest] > reach or nearest in used:
+            nearest = on[0] if on else -1
+        if nearest < 0:
             judged.false += 1
             judged.notes.append(
                 f"false box, top at ({top[0]:+.3f}, {top[1]:+.3f}, {top[2]:+.3f}), size "
