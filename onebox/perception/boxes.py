@@ -278,14 +278,22 @@ def find_boxes(
     is_box &= ~_hollow(tops, looked, base, depth, lens, support)
     carried = is_box & (on >= 0)
     carries = np.bincount(on[carried], minlength=len(tops)) >= PLATFORM_CARRIES
-    # ... a box standing on it outside its rectangle stands past a hidden side of it
-    d = tops.middle_ab[carried] - tops.middle_ab[on[carried]]
-    axis = tops.axis_ab[on[carried]]
-    inside = (
-        np.abs(d[:, 0] * axis[:, 0] + d[:, 1] * axis[:, 1]) <= tops.length_m[on[carried]] / 2
-    ) & (np.abs(d[:, 1] * axis[:, 0] - d[:, 0] * axis[:, 1]) <= tops.width_m[on[carried]] / 2)
-    past = np.bincount(on[carried][~inside], minlength=len(tops)) >= 2
-    platform = carries & ((round_.covered >= PLATFORM_COVERED) | past)
+    # ... boxes standing on it outside its rectangle stand past a hidden side of it, the same
+    # side (a pallet's rim before its load; taller neighbours either side of a carton are not)
+    under = on[carried]
+    d = tops.middle_ab[carried] - tops.middle_ab[under]
+    axis = tops.axis_ab[under]
+    along = d[:, 0] * axis[:, 0] + d[:, 1] * axis[:, 1]
+    across = d[:, 1] * axis[:, 0] - d[:, 0] * axis[:, 1]
+    beyond_length = np.abs(along) - tops.length_m[under] / 2
+    beyond_width = np.abs(across) - tops.width_m[under] / 2
+    side = np.where(
+        beyond_length > beyond_width, np.where(along > 0, 0, 1), np.where(across > 0, 2, 3)
+    )
+    outside = (np.maximum(beyond_length, beyond_width) > 0) & round_.hidden[under, side]
+    past = np.zeros((len(tops), 4), dtype=np.int64)
+    np.add.at(past, (under[outside], side[outside]), 1)
+    platform = carries & ((round_.covered >= PLATFORM_COVERED) | (past.max(axis=1) >= 2))
     is_box &= ~platform
     return Found(
         support, _report(tops, round_, is_box, base, on, support, camera_to_world, settings), frame
