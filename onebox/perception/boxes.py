@@ -267,9 +267,9 @@ def find_boxes(
         return Found(support, [], frame)
     # What lies round the tops is looked at in the whole picture.
     round_ = _look_round(tops, origin, depth, lens, support)
-    is_box = _boxes(tops, round_, settings, lump_px)
     looked = _looked_at(tops, round_, lens, support)
-    face_bottom, ledge = _face_bottom(tops, looked, origin, depth, lens, support)
+    face_bottom, ledge, faces = _face_bottom(tops, looked, origin, depth, lens, support)
+    is_box = _boxes(tops, round_, faces, settings, lump_px)
     base, on = _bases(tops, round_, face_bottom, ledge, depth, lens, support)
     # A top that several boxes stand on, and that they mostly hide or that they stand on
     # outside its rectangle (past a side of it something hides), is a platform (a pallet's
@@ -446,7 +446,9 @@ def _covered(
     return nearer.mean(axis=1), nearer[:, corner].mean(axis=1)
 
 
-def _boxes(tops: Tops, round_: Round, settings: FinderSettings, lump_px: float) -> BoolArray:
+def _boxes(
+    tops: Tops, round_: Round, faces: BoolArray, settings: FinderSettings, lump_px: float
+) -> BoolArray:
     """Which tops are boxes' (see the module docstring)."""
     # What something nearer hides cannot be filled: ask for the rest.
     fill_needed = settings.min_score * (1.0 - round_.covered)
@@ -464,7 +466,7 @@ def _boxes(tops: Tops, round_: Round, settings: FinderSettings, lump_px: float) 
         & flat
         & (tops.fill >= fill_needed)
         & (tops.corners >= corners_needed)
-        & (round_.sloping.sum(axis=1) <= 2)
+        & ((round_.sloping & ~faces).sum(axis=1) <= 2)
         & ~((tops.sag_share > CURVED_SHARE) & (tops.sag_m > CURVED_SIGMAS * sag_noise))
     )
     if not settings.keep_cut_off:
@@ -550,11 +552,12 @@ def _face_bottom(
     depth_m: Float32Array,
     lens: Intrinsics,
     support: Support,
-) -> tuple[Float64Array, BoolArray]:
+) -> tuple[Float64Array, BoolArray, BoolArray]:
     """How far down each top's faces are seen going on from its edge without a break (on the
     side that shows them lowest): a box's side ends where it stands. NaN where no face is
     seen. Also whether the face is seen to end there: past it nothing is where the face would
-    go on, or the face of a box under it sticks out (not a top in front, which only hides it)."""
+    go on, or the face of a box under it sticks out (not a top in front, which only hides it).
+    And (n, 4) whether a face is seen going down from each side's edge at all."""
     n = len(tops)
     share = 1.0 - np.linspace(0.05, 1.0, FACE_LEVELS)
     heights = share[None, :] * tops.height_m[:, None]  # top down to the support
@@ -565,6 +568,7 @@ def _face_bottom(
         nearer = (seen < z_expected - tolerance) & inside
     present = on_face.mean(axis=3) >= 0.5  # (n, 4, levels)
     run = np.cumprod(present, axis=2).sum(axis=2)  # levels seen from the edge down, unbroken
+    faces = run > 0
     run = np.where(looked, run, 0)
     side = np.argmax(run, axis=1)
     deepest = run[np.arange(n), side]
@@ -591,7 +595,7 @@ def _face_bottom(
     ends = recessed | sticking_out
     ledge = (ends.mean(axis=1) >= 0.5) & (deepest > 0) & (deepest < FACE_LEVELS)
     looked_any = looked.any(axis=1)
-    return np.where(looked_any, bottom, np.nan), ledge & looked_any
+    return np.where(looked_any, bottom, np.nan), ledge & looked_any, faces
 
 
 def _bases(
