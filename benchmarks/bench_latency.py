@@ -78,6 +78,8 @@ from schemas import (
 ROOT = Path(__file__).resolve().parent.parent
 SHARED = ROOT.parent / "shared" / "realdata"
 """The full folder of real captures, kept beside the repository (some may not be committed)."""
+WARM_UP_S = 60.0
+"""How long the locator may take to answer its first capture (starting, compiling)."""
 
 
 class Clock:
@@ -268,12 +270,16 @@ def run_bench_source(pubs: Publishers, clock: Clock, captures: int, rate_hz: flo
     """Publish captures from here, as a camera would, timing from just before the depth put."""
     period_s = 1.0 / rate_hz
     # Warm up: until the locator answers, so its subscriptions are in place.
+    deadline = time.monotonic() + WARM_UP_S
     stamp = 0
     while True:
         stamp += 1
         pubs.depth.publish_bytes(pubs.before_depth(stamp))
         if wait_until(lambda: bool(clock.end_ns), 0.5):
             break
+        if time.monotonic() > deadline:
+            print(f"  no answer from the locator in {WARM_UP_S:.0f} s", flush=True)
+            return
     with clock.lock:
         clock.end_ns.clear()
     progress = Progress(captures)
