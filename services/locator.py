@@ -724,6 +724,14 @@ class Locator:
                 f"dropped: {e}",
             )
             return
+        if camera_to_world is None and self._config.method == "seed":
+            self._report.warn(
+                depth_key,
+                "seed-no-pose",
+                f"--method seed needs the camera's pose, and nothing places {frame.frame_id!r} "
+                f"in {self._world_frame!r}: depth picture stamped {frame.stamp_ns:,} ns dropped",
+            )
+            return
         if not seed.has_reading(frame.depth_m):
             self._report.warn(
                 depth_key,
@@ -736,7 +744,7 @@ class Locator:
         started = time.perf_counter()
         depth_m = frame.depth_m if lens.rectifier is None else lens.rectifier.depth(frame.depth_m)
         if self._config.method == "seed":
-            assert camera_to_world is not None  # LocatorSettings refuses seed without a pose
+            assert camera_to_world is not None  # dropped above without one
             table_z = self._config.table_z_m or 0.0
             box = seed.locate_box(
                 depth_m, lens.intrinsics, camera_to_world, table_z, self._config.min_height_m

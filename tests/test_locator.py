@@ -232,6 +232,22 @@ def test_without_a_pose_the_box_is_reported_in_the_cameras_frame(locators, test_
     assert support.offset_m == pytest.approx(0.40, abs=0.001)
 
 
+def test_the_seeds_method_without_a_pose_says_so_and_waits_for_one(locators, test_bus, inbox):
+    """--method seed measures in the world: with nothing placing the camera it drops each
+    picture with a line saying why (no traceback), and measures once tf_static comes."""
+    test_bus.subscribe_raw("detections", inbox)
+    camera = Camera(test_bus)
+    output = locators("--method", "seed")
+    deadline = time.monotonic() + 20.0
+    while "needs the camera's pose" not in output.text and time.monotonic() < deadline:
+        camera.capture()
+        time.sleep(0.2)
+    output.wait_for("needs the camera's pose", timeout_s=1.0)
+    camera.publish_tf()
+    assert_default_box(camera.until_measured(inbox))
+    assert "Traceback" not in output.stop()
+
+
 def test_workspace_leaves_out_what_lies_outside(locators, test_bus, inbox):
     """A workspace that does not hold the box: an empty array, and the no-box line."""
     test_bus.subscribe_raw("detections", inbox)
