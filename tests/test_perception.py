@@ -82,8 +82,6 @@ def noisy(depth, noise, seed: int):
 
 XFAIL: dict[str, str] = {
     "noise-free, 4 boxes at 2 m": "all 4 found, but one's yaw is 2.3 deg off (bound 1 deg)",
-    "cans lying down, d435": "seed 1 misses the 16 x 10 x 8 cm carton (1 box found for 2); no "
-    "can is a box",
     "cans lying down, lumpy sigma 3 mm": "all 4 cans are boxes in each of 3 pictures (6 found "
     "for 2: 0.08 x 0.07, 0.16 x 0.06, 0.10 x 0.05 and 0.13 x 0.04 m)",
     "a box nearly covering the one under it": "measured from the table: 0.220 m for 0.125",
@@ -96,8 +94,6 @@ XFAIL: dict[str, str] = {
     "0.0607 m boxes beside it",
     "tops joined by side faces, d435, depth only": "the 0.15 m box measured 0.070 m (80.5 mm "
     "short: standing on the low box beside it); the tall one right",
-    "a flat box's corner hidden by a taller one": "the flat box 295.3 mm long for 300 (bound "
-    "4 mm), its centre 3.4 mm off (bound 3)",
     "cartons in rows, some 14 mm lower": "the two taller cartons measured 0.014 m tall, standing "
     "on their lower neighbours (0.150 true)",
     "colour 2 px off, a tall box 2 m away": "no box: the 0.3 x 0.05 x 0.3 m box is not found in "
