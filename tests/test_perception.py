@@ -729,12 +729,14 @@ def test_the_kernels_measure_what_numpy_does():
     angles = np.radians([0.0, 30.0, 89.0])
     kernels.warm_up()
     box, spans = kernels.extents(label, a, b, 7), kernels.extents_at_angles(
-        np.maximum(label, 0), a, b, np.tile(angles, (7, 1)))  # fmt: skip
+        np.maximum(label, 0), a, b, label < 5, np.tile(angles, (7, 1)))  # fmt: skip
     for k in range(7):
         mine = label == k
         assert box[k] == pytest.approx([a[mine].min(), a[mine].max(), b[mine].min(),
                                         b[mine].max()])  # fmt: skip
-        ours = np.maximum(label, 0) == k
+        ours = (np.maximum(label, 0) == k) & (label < 5)
+        if not ours.any():
+            continue
         for j, t in enumerate(angles):
             p, q = (
                 a[ours] * np.cos(t) + b[ours] * np.sin(t),

@@ -7,44 +7,14 @@ fills one row per top: one pass over the pixels, whatever the number of tops.
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 import numpy.typing as npt
 
 Float64Array = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int32]
-
-
-@numba.njit(cache=True, nogil=True)
-def extents_at_angles(
-    label: IntArray, a: Float64Array, b: Float64Array, angles: Float64Array
-) -> Float64Array:
-    """For each top and each of its angles (``angles`` is (count, m): each top's own), the
-    extents of its points along the two axes turned by that angle: shape (count, m, 4) = (min
-    along, max along, min across, max across)."""
-    count, n_angles = angles.shape
-    out = np.empty((count, n_angles, 4))
-    out[:, :, 0] = np.inf
-    out[:, :, 1] = -np.inf
-    out[:, :, 2] = np.inf
-    out[:, :, 3] = -np.inf
-    cos = np.cos(angles)
-    sin = np.sin(angles)
-    for i in range(label.shape[0]):
-        k = label[i]
-        for j in range(n_angles):
-            p = a[i] * cos[k, j] + b[i] * sin[k, j]
-            q = b[i] * cos[k, j] - a[i] * sin[k, j]
-            row = out[k, j]
-            if p < row[0]:
-                row[0] = p
-            if p > row[1]:
-                row[1] = p
-            if q < row[2]:
-                row[2] = q
-            if q > row[3]:
-                row[3] = q
-    return out
 
 
 @numba.njit(cache=True, nogil=True)
@@ -117,13 +87,352 @@ def grow(
         count = added
 
 
+@numba.njit(cache=True, nogil=True)
+def _smallest_rectangle(
+    top: IntArray,
+    a: Float64Array,
+    b: Float64Array,
+    on_edge: npt.NDArray[np.bool_],
+    n: int,
+    angles: Float64Array,
+    fine_angles: Float64Array,
+) -> Float64Array:
+    """Each top's angle whose rectangle round its edge pixels is smallest: tried at
+    ``angles``, then at ``fine_angles`` about the best of them (the first best wins ties)."""
+    best = np.zeros(n)
+    for search in range(2):
+        m = len(angles) if search == 0 else len(fine_angles)
+        tried = np.empty((n, m))
+        for k in range(n):
+            for j in range(m):
+                tried[k, j] = angles[j] if search == 0 else best[k] + fine_angles[j]
+        spans = extents_at_angles(top, a, b, on_edge, tried)
+        for k in range(n):
+            smallest = np.inf
+            at = 0
+            for j in range(m):
+                area = (spans[k, j, 1] - spans[k, j, 0]) * (spans[k, j, 3] - spans[k, j, 2])
+                if np.isfinite(area) and area < smallest:
+                    smallest = area
+                    at = j
+            best[k] = tried[k, at]
+    return best
+
+
+@numba.njit(cache=True, nogil=True)
+def extents_at_angles(
+    label: IntArray,
+    a: Float64Array,
+    b: Float64Array,
+    use: npt.NDArray[np.bool_],
+    angles: Float64Array,
+) -> Float64Array:
+    """For each top and each of its angles (``angles`` is (count, m): each top's own), the
+    extents of its points where ``use`` holds along the two axes turned by that angle: shape
+    (count, m, 4) = (min along, max along, min across, max across)."""
+    count, n_angles = angles.shape
+    out = np.empty((count, n_angles, 4))
+    out[:, :, 0] = np.inf
+    out[:, :, 1] = -np.inf
+    out[:, :, 2] = np.inf
+    out[:, :, 3] = -np.inf
+    cos = np.cos(angles)
+    sin = np.sin(angles)
+    for i in range(label.shape[0]):
+        if not use[i]:
+            continue
+        k = label[i]
+        for j in range(n_angles):
+            p = a[i] * cos[k, j] + b[i] * sin[k, j]
+            q = b[i] * cos[k, j] - a[i] * sin[k, j]
+            if p < out[k, j, 0]:
+                out[k, j, 0] = p
+            if p > out[k, j, 1]:
+                out[k, j, 1] = p
+            if q < out[k, j, 2]:
+                out[k, j, 2] = q
+            if q > out[k, j, 3]:
+                out[k, j, 3] = q
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _profile_keep(
+    top: IntArray,
+    coordinate: Float64Array,
+    pixels: npt.NDArray[np.int64],
+    step: Float64Array,
+    share: float,
+) -> npt.NDArray[np.bool_]:
+    """Whether each pixel's cross-section along ``coordinate`` (bins ``step`` wide from its
+    top's least coordinate) holds at least ``share`` of its top's typical one (its pixels over
+    its cross-sections that hold any)."""
+    n = len(pixels)
+    start = np.full(n, np.inf)
+    end = np.full(n, -np.inf)
+    for i in range(len(top)):
+        k = top[i]
+        if coordinate[i] < start[k]:
+            start[k] = coordinate[i]
+        if coordinate[i] > end[k]:
+            end[k] = coordinate[i]
+    offset = np.zeros(n + 1, dtype=np.int64)
+    for k in range(n):
+        width = 0
+        if np.isfinite(end[k]):
+            width = int(np.floor((end[k] - start[k]) / step[k])) + 1
+        offset[k + 1] = offset[k] + width
+    counts = np.zeros(offset[n], dtype=np.int64)
+    slot = np.empty(len(top), dtype=np.int64)
+    for i in range(len(top)):
+        k = top[i]
+        slot[i] = offset[k] + int(np.floor((coordinate[i] - start[k]) / step[k]))
+        counts[slot[i]] += 1
+    typical = np.empty(n)
+    for k in range(n):
+        occupied = 0
+        for s in range(offset[k], offset[k + 1]):
+            if counts[s] > 0:
+                occupied += 1
+        typical[k] = pixels[k] / max(occupied, 1)
+    keep = np.empty(len(top), dtype=np.bool_)
+    for i in range(len(top)):
+        keep[i] = counts[slot[i]] >= share * typical[top[i]]
+    return keep
+
+
+@numba.njit(cache=True, nogil=True)
+def measure_tops(
+    top: IntArray,
+    a: Float64Array,
+    b: Float64Array,
+    h: Float64Array,
+    z: Float64Array,
+    sigma: Float64Array,
+    on_edge: npt.NDArray[np.bool_],
+    ray_x: Float64Array,
+    ray_y: Float64Array,
+    basis: Float64Array,
+    fx_fy: float,
+    n: int,
+    angles: Float64Array,
+    fine_angles: Float64Array,
+    profile_share: float,
+) -> tuple[Float64Array, ...]:
+    """Every top measured from its pixels (step 5 of :mod:`onebox.perception.tops`), a few
+    passes over the pixels whatever the number of tops.
+
+    Per pixel: its top, its plane coordinates ``a``, ``b``, its height ``h``, depth ``z``, the
+    noise ``sigma`` there, whether it is on its top's outline, and its ray's x/z and y/z;
+    ``basis`` is e1, e2 and the support normal (rows), ``fx_fy`` the lens's fx fy.
+
+    Returns per top (n): pixels, mean depth, mean sigma, height at the rectangle's middle,
+    middle (n, 2), axis (n, 2), length, width, area, fill, corners, rms, sag, sag share,
+    tilt (degrees) and slope (n, 2), as :class:`onebox.perception.tops.Tops` holds them."""
+    count = len(top)
+    pixels = np.zeros(n, dtype=np.int64)
+    sums = np.zeros((n, 5))
+    for i in range(count):
+        k = top[i]
+        pixels[k] += 1
+        sums[k, 0] += a[i]
+        sums[k, 1] += b[i]
+        sums[k, 2] += h[i]
+        sums[k, 3] += z[i]
+        sums[k, 4] += sigma[i]
+    safe = np.maximum(pixels, 1).astype(np.float64)
+    means = np.empty((n, 5))
+    for k in range(n):
+        for j in range(5):
+            means[k, j] = sums[k, j] / safe[k]
+    # The top's plane, h = alpha a + beta b + gamma, by least squares about its middle.
+    moments = np.zeros((n, 5))  # aa, ab, bb, ah, bh
+    for i in range(count):
+        k = top[i]
+        da = a[i] - means[k, 0]
+        db = b[i] - means[k, 1]
+        dh = h[i] - means[k, 2]
+        moments[k, 0] += da * da
+        moments[k, 1] += da * db
+        moments[k, 2] += db * db
+        moments[k, 3] += da * dh
+        moments[k, 4] += db * dh
+    alpha = np.zeros(n)
+    beta = np.zeros(n)
+    for k in range(n):
+        saa = moments[k, 0] / safe[k]
+        sab = moments[k, 1] / safe[k]
+        sbb = moments[k, 2] / safe[k]
+        sah = moments[k, 3] / safe[k]
+        sbh = moments[k, 4] / safe[k]
+        det = saa * sbb - sab * sab
+        if det > 1e-18:
+            alpha[k] = (sah * sbb - sbh * sab) / det
+            beta[k] = (sbh * saa - sah * sab) / det
+    residual = np.empty(count)
+    squared = np.zeros(n)
+    for i in range(count):
+        k = top[i]
+        da = a[i] - means[k, 0]
+        db = b[i] - means[k, 1]
+        dh = h[i] - means[k, 2]
+        residual[i] = dh - alpha[k] * da - beta[k] * db
+        squared[k] += residual[i] * residual[i]
+    rms = np.sqrt(squared / safe)
+    angle = _smallest_rectangle(top, a, b, on_edge, n, angles, fine_angles)
+    cos = np.cos(angle)
+    sin = np.sin(angle)
+    # Each pixel's footprint on the support plane: z^2 / (fx fy |m . ray|) on the top's own
+    # plane (normal m ~ n - alpha e1 - beta e2), times m . n to lay it on the support's.
+    p = np.empty(count)
+    q = np.empty(count)
+    footprint = np.empty(count)
+    summed = np.zeros(n)
+    for i in range(count):
+        k = top[i]
+        p[i] = a[i] * cos[k] + b[i] * sin[k]
+        q[i] = b[i] * cos[k] - a[i] * sin[k]
+        along_e1 = ray_x[i] * basis[0, 0] + ray_y[i] * basis[0, 1] + basis[0, 2]
+        along_e2 = ray_x[i] * basis[1, 0] + ray_y[i] * basis[1, 1] + basis[1, 2]
+        along_n = ray_x[i] * basis[2, 0] + ray_y[i] * basis[2, 1] + basis[2, 2]
+        facing = along_n - alpha[k] * along_e1 - beta[k] * along_e2
+        footprint[i] = z[i] * z[i] / (fx_fy * max(abs(facing), 0.05))
+        summed[k] += footprint[i]
+    step = np.sqrt(summed / safe)  # one pixel's side on the plane
+    keep = _profile_keep(top, p, pixels, step, profile_share)
+    keep &= _profile_keep(top, q, pixels, step, profile_share)
+    kept = np.zeros(n, dtype=np.int64)
+    for i in range(count):
+        if keep[i]:
+            kept[top[i]] += 1
+    box = np.empty((n, 4))
+    box[:, 0] = np.inf
+    box[:, 1] = -np.inf
+    box[:, 2] = np.inf
+    box[:, 3] = -np.inf
+    area = np.zeros(n)
+    for i in range(count):
+        k = top[i]
+        if kept[k] > 0 and not keep[i]:
+            continue
+        keep[i] = True
+        box[k, 0] = min(box[k, 0], p[i])
+        box[k, 1] = max(box[k, 1], p[i])
+        box[k, 2] = min(box[k, 2], q[i])
+        box[k, 3] = max(box[k, 3], q[i])
+        area[k] += footprint[i]
+    for k in range(n):
+        box[k, 0] -= 0.5 * step[k]
+        box[k, 1] += 0.5 * step[k]
+        box[k, 2] -= 0.5 * step[k]
+        box[k, 3] += 0.5 * step[k]
+    extent_p = box[:, 1] - box[:, 0]
+    extent_q = box[:, 3] - box[:, 2]
+    mid_p = 0.5 * (box[:, 0] + box[:, 1])
+    mid_q = 0.5 * (box[:, 2] + box[:, 3])
+    # How full the rectangle's corners are: corner squares a fifth of the width on a side
+    # (three pixels at least), a pixel in from the rectangle's sides.
+    corner = np.maximum(0.2 * np.minimum(extent_p, extent_q), 3.0 * step)
+    corners = np.zeros(n)
+    for i in range(count):
+        k = top[i]
+        if not keep[i]:
+            continue
+        dp = 0.5 * extent_p[k] - step[k] - abs(p[i] - mid_p[k])
+        dq = 0.5 * extent_q[k] - step[k] - abs(q[i] - mid_q[k])
+        if dp >= 0 and dp < corner[k] and dq >= 0 and dq < corner[k]:
+            corners[k] += footprint[i]
+    corners /= 4.0 * corner * corner
+    # Lengths on the top's own plane (it may lean): stretch by the slope along each axis.
+    stretched_p = np.empty(n)
+    stretched_q = np.empty(n)
+    for k in range(n):
+        stretched_p[k] = extent_p[k] * math.hypot(1.0, alpha[k] * cos[k] + beta[k] * sin[k])
+        stretched_q[k] = extent_q[k] * math.hypot(1.0, beta[k] * cos[k] - alpha[k] * sin[k])
+    # How the top curves off its plane along each axis: the residuals' quadratic part over the
+    # middle half of the top, as the sag from its middle to that half's edges.
+    sag = np.zeros(n)
+    sag_share = np.zeros(n)
+    for axis in range(2):
+        coordinate = p if axis == 0 else q
+        mid = mid_p if axis == 0 else mid_q
+        extent = stretched_p if axis == 0 else stretched_q
+        inner = np.zeros((n, 5))  # count, mean offset^2, mean residual, then two products
+        for i in range(count):
+            k = top[i]
+            offset = coordinate[i] - mid[k]
+            if abs(offset) < extent[k] / 4:
+                inner[k, 0] += 1.0
+                inner[k, 1] += offset * offset
+                inner[k, 2] += residual[i]
+        for k in range(n):
+            inner[k, 0] = max(inner[k, 0], 1.0)
+            inner[k, 1] /= inner[k, 0]
+            inner[k, 2] /= inner[k, 0]
+        for i in range(count):
+            k = top[i]
+            offset = coordinate[i] - mid[k]
+            if abs(offset) < extent[k] / 4:
+                centred = offset * offset - inner[k, 1]
+                inner[k, 3] += centred * (residual[i] - inner[k, 2])
+                inner[k, 4] += centred * centred
+        for k in range(n):
+            curve = (inner[k, 3] / inner[k, 0]) / max(inner[k, 4] / inner[k, 0], 1e-18)
+            this = abs(curve) * (extent[k] / 4) ** 2
+            share = this / max(extent[k] / 2, 1e-9)
+            if share > sag_share[k]:
+                sag[k] = this
+            sag_share[k] = max(sag_share[k], share)
+    middle = np.empty((n, 2))
+    axis_ab = np.empty((n, 2))
+    slope = np.empty((n, 2))
+    height = np.empty(n)
+    tilt = np.empty(n)
+    fill = np.empty(n)
+    for k in range(n):
+        middle[k, 0] = mid_p[k] * cos[k] - mid_q[k] * sin[k]
+        middle[k, 1] = mid_p[k] * sin[k] + mid_q[k] * cos[k]
+        if extent_p[k] >= extent_q[k]:
+            axis_ab[k, 0], axis_ab[k, 1] = cos[k], sin[k]
+        else:
+            axis_ab[k, 0], axis_ab[k, 1] = -sin[k], cos[k]
+        slope[k, 0], slope[k, 1] = alpha[k], beta[k]
+        height[k] = (
+            means[k, 2]
+            + alpha[k] * (middle[k, 0] - means[k, 0])
+            + beta[k] * (middle[k, 1] - means[k, 1])
+        )
+        tilt[k] = math.degrees(math.atan(math.hypot(alpha[k], beta[k])))
+        fill[k] = area[k] / max(extent_p[k] * extent_q[k], 1e-12)
+    return (
+        pixels.astype(np.float64),
+        means[:, 3].copy(),
+        means[:, 4].copy(),
+        height,
+        middle,
+        axis_ab,
+        np.maximum(stretched_p, stretched_q),
+        np.minimum(stretched_p, stretched_q),
+        area,
+        fill,
+        np.minimum(corners, 1.0),
+        rms,
+        sag,
+        sag_share,
+        tilt,
+        slope,
+    )
+
+
 def warm_up() -> None:
     """Compile (or load from the cache) every kernel on a tiny input."""
     label = np.zeros(2, dtype=np.int32)
     a = np.array([0.0, 1.0])
-    extents_at_angles(label, a, a, np.array([[0.0, 0.5]]))
+    one = np.ones(2, dtype=np.bool_)
+    extents_at_angles(label, a, a, one, np.array([[0.0, 0.5]]))
     extents(label, a, a, 1)
     grid = np.zeros((2, 2), dtype=np.int32)
     grid[0, 0] = 1
     flat = np.zeros((2, 2), dtype=np.float32)
     grow(grid, flat, np.ones((2, 2), dtype=np.bool_), flat + 1.0, 1)
+    measure_tops(label, a, a, a, a + 1.0, a, one, a, a, np.eye(3), 1.0, 1, a, a, 0.25)

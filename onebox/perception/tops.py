@@ -318,130 +318,57 @@ def _measure(
     lens: Intrinsics,
     basis: Float64Array,
 ) -> Tops:
+    """Step 5 of the module docstring for every top (:func:`kernels.measure_tops`)."""
     rows, cols = labels.shape
     n = int(labels.max())
     pts = points_of(labels, depth_m, surface, lens, basis)
-    top, a, b, h, z = pts.top, pts.a, pts.b, pts.h, pts.z
-    pixels = np.bincount(top, minlength=n).astype(np.int32)
-    safe = np.maximum(pixels, 1).astype(np.float64)
-
-    def mean(v: Float64Array) -> Float64Array:
-        result: Float64Array = np.bincount(top, weights=v, minlength=n) / safe
-        return result
-
-    mean_a, mean_b, mean_h, mean_z = mean(a), mean(b), mean(h), mean(z)
-    # The top's plane, h = alpha a + beta b + gamma, by least squares about its middle.
-    da, db, dh = a - mean_a[top], b - mean_b[top], h - mean_h[top]
-    saa, sab, sbb = mean(da * da), mean(da * db), mean(db * db)
-    sah, sbh = mean(da * dh), mean(db * dh)
-    det = saa * sbb - sab * sab
-    ok = det > 1e-18
-    det = np.where(ok, det, 1.0)
-    alpha = np.where(ok, (sah * sbb - sbh * sab) / det, 0.0)
-    beta = np.where(ok, (sbh * saa - sah * sab) / det, 0.0)
-    residual = dh - alpha[top] * da - beta[top] * db
-    rms = np.sqrt(mean(residual * residual))
-    tilt = np.degrees(np.arctan(np.hypot(alpha, beta)))
-
-    # The rectangle's angle: the smallest rectangle round the outline.
+    # The outline: pixels with another label (or none) in their 3 x 3 neighbourhood.
     flat_labels = labels.astype(np.float32)
     square = np.ones((3, 3), np.uint8)
     edge = (labels > 0) & (
         (cv2.erode(flat_labels, square) != flat_labels)
         | (cv2.dilate(flat_labels, square) != flat_labels)
     )
-    on_edge = edge.ravel()[pts.index]
-    # Coarse, then fine about the best.
-    spans = kernels.extents_at_angles(
-        top[on_edge],
-        a[on_edge],
-        b[on_edge],
-        np.ascontiguousarray(np.broadcast_to(ANGLES, (n, len(ANGLES)))),
-    )
-    areas = (spans[:, :, 1] - spans[:, :, 0]) * (spans[:, :, 3] - spans[:, :, 2])
-    coarse = ANGLES[np.argmin(np.where(np.isfinite(areas), areas, np.inf), axis=1)]
-    fine = coarse[:, None] + FINE_ANGLES[None, :]
-    spans = kernels.extents_at_angles(top[on_edge], a[on_edge], b[on_edge], fine)
-    areas = (spans[:, :, 1] - spans[:, :, 0]) * (spans[:, :, 3] - spans[:, :, 2])
-    best = np.argmin(np.where(np.isfinite(areas), areas, np.inf), axis=1)
-    angle = fine[np.arange(n), best]
-    cos, sin = np.cos(angle), np.sin(angle)
-    p = a * cos[top] + b * sin[top]
-    q = b * cos[top] - a * sin[top]
-
-    # Each pixel's footprint on the support plane: z^2 / (fx fy |m . ray|) on the top's own
-    # plane (normal m ~ n - alpha e1 - beta e2), times m . n to lay it on the support's.
     across, down = _rays(lens, cols, rows)
     r, c = np.divmod(pts.index, cols)
-    ray = np.stack([across[c], down[r], np.ones(len(c), np.float32)], axis=1).astype(np.float64)
-    facing = ray @ basis[2] - alpha[top] * (ray @ basis[0]) - beta[top] * (ray @ basis[1])
-    footprint = z * z / (lens.fx * lens.fy * np.maximum(np.abs(facing), 0.05))
-    step = np.sqrt(mean(footprint))  # one pixel's side on the plane
-
-    keep = _within_profile(top, p, step, n) & _within_profile(top, q, step, n)
-    keep |= np.bincount(top, weights=keep, minlength=n)[top] == 0  # nothing kept: keep all
-    box = kernels.extents(np.where(keep, top, -1).astype(np.int32), p, q, n)
-    area = np.bincount(top, weights=footprint * keep, minlength=n).astype(np.float64)
-    box[:, 0] -= 0.5 * step
-    box[:, 1] += 0.5 * step
-    box[:, 2] -= 0.5 * step
-    box[:, 3] += 0.5 * step
-    extent_p = box[:, 1] - box[:, 0]
-    extent_q = box[:, 3] - box[:, 2]
-    fill = area / np.maximum(extent_p * extent_q, 1e-12)
-    mid_p = 0.5 * (box[:, 0] + box[:, 1])
-    mid_q = 0.5 * (box[:, 2] + box[:, 3])
-    middle = np.stack([mid_p * cos - mid_q * sin, mid_p * sin + mid_q * cos], axis=1)
-    along_p = extent_p >= extent_q
-    axis = np.where(along_p[:, None], np.stack([cos, sin], 1), np.stack([-sin, cos], 1))
-    # Lengths on the top's own plane (it may lean): stretch by the slope along each axis.
-    slope_p = np.hypot(1.0, alpha * cos + beta * sin)
-    slope_q = np.hypot(1.0, beta * cos - alpha * sin)
-    # How full the rectangle's corners are: a box's top reaches them, a disc's or a rounded
-    # tin's does not. Corner squares a fifth of the width on a side (three pixels at least),
-    # a pixel in from the rectangle's sides (which the pixels' middles do not reach).
-    corner = np.maximum(0.2 * np.minimum(extent_p, extent_q), 3.0 * step)
-    dp = 0.5 * extent_p[top] - step[top] - np.abs(p - mid_p[top])
-    dq = 0.5 * extent_q[top] - step[top] - np.abs(q - mid_q[top])
-    in_corner = (dp >= 0) & (dp < corner[top]) & (dq >= 0) & (dq < corner[top])
-    corners = np.bincount(top, weights=footprint * (in_corner & keep), minlength=n) * 1.0
-    corners /= 4.0 * corner**2
-    extent_p = extent_p * slope_p
-    extent_q = extent_q * slope_q
-    length = np.maximum(extent_p, extent_q)
-    width = np.minimum(extent_p, extent_q)
-    height = mean_h + alpha * (middle[:, 0] - mean_a) + beta * (middle[:, 1] - mean_b)
-    # How the top curves off its plane along each axis: the residuals' quadratic part over the
-    # middle half of the top, as the sag from the middle to that half's edges (a lying can's
-    # crest curves all across; a carton's top whose edges a camera smears drops only at them).
-    sag = np.zeros(n)
-    sag_share = np.zeros(n)
-    for coordinate, mid, extent in ((p, mid_p, extent_p), (q, mid_q, extent_q)):
-        offset = coordinate - mid[top]
-        middle_half = (np.abs(offset) < extent[top] / 4).astype(np.float64)
-        count = np.maximum(np.bincount(top, weights=middle_half, minlength=n), 1.0)
-
-        def inner(
-            v: Float64Array, w: Float64Array = middle_half, c: Float64Array = count
-        ) -> Float64Array:
-            result: Float64Array = np.bincount(top, weights=v * w, minlength=n) / c
-            return result
-
-        square = offset**2
-        centred = square - inner(square)[top]
-        curve = inner(centred * (residual - inner(residual)[top])) / np.maximum(
-            inner(centred * centred), 1e-18
-        )
-        this = np.abs(curve) * (extent / 4) ** 2
-        share = this / np.maximum(extent / 2, 1e-9)
-        sag = np.where(share > sag_share, this, sag)
-        sag_share = np.maximum(sag_share, share)
-
+    (
+        pixels,
+        mean_z,
+        sigma,
+        height,
+        middle,
+        axis,
+        length,
+        width,
+        area,
+        fill,
+        corners,
+        rms,
+        sag,
+        sag_share,
+        tilt,
+        slope,
+    ) = kernels.measure_tops(
+        pts.top,
+        pts.a,
+        pts.b,
+        pts.h,
+        pts.z,
+        surface.sigma_m.ravel()[pts.index].astype(np.float64),
+        edge.ravel()[pts.index],
+        across[c].astype(np.float64),
+        down[r].astype(np.float64),
+        basis,
+        lens.fx * lens.fy,
+        n,
+        ANGLES,
+        FINE_ANGLES,
+        PROFILE_SHARE,
+    )
     border = np.zeros_like(labels, dtype=bool)
     border[[0, -1], :] = True
     border[:, [0, -1]] = True
     on_border = np.bincount(labels[border], minlength=n + 1)[1:] > 0
-    sigma = np.bincount(top, weights=surface.sigma_m.ravel()[pts.index], minlength=n) / safe
     return Tops(
         labels=labels,
         height_m=height,
@@ -451,36 +378,16 @@ def _measure(
         width_m=width,
         area_m2=area,
         fill=fill,
-        corners=np.minimum(corners, 1.0),
+        corners=corners,
         rms_m=rms,
         sag_m=sag,
         sag_share=sag_share,
         tilt_deg=tilt,
-        slope_ab=np.stack([alpha, beta], axis=1),
+        slope_ab=slope,
         depth_m=mean_z,
         sigma_m=sigma,
-        pixels=pixels,
+        pixels=pixels.astype(np.int32),
         on_border=on_border,
         basis=basis,
         points=pts,
     )
-
-
-def _within_profile(
-    top: IntArray, coordinate: Float64Array, step: Float64Array, n: int
-) -> BoolArray:
-    """Whether each pixel's cross-section along ``coordinate`` (bins a pixel wide) holds at
-    least PROFILE_SHARE of its top's typical one."""
-    span = kernels.extents(top, coordinate, coordinate, n)
-    start, end = span[:, 0], span[:, 1]
-    bins = np.floor((coordinate - start[top]) / step[top]).astype(np.int64)
-    with np.errstate(invalid="ignore"):
-        width = np.where(np.isfinite(end), np.floor((end - start) / step) + 1, 0).astype(np.int64)
-    offset = np.concatenate([[0], np.cumsum(width)[:-1]])
-    slot = offset[top] + bins
-    counts = np.bincount(slot, minlength=int(width.sum()))
-    owner = np.repeat(np.arange(n), width)
-    occupied = np.bincount(owner, weights=counts > 0, minlength=n)
-    typical = np.bincount(top, minlength=n) / np.maximum(occupied, 1)
-    result: BoolArray = counts[slot] >= PROFILE_SHARE * typical[top]
-    return result
