@@ -424,6 +424,158 @@ def measure_tops(
     )
 
 
+@numba.njit(cache=True, nogil=True)
+def _mean_run(
+    run_count: Float64Array,
+    run_sum: Float64Array,
+    first: int,
+    start: int,
+    upto: int,
+) -> float:
+    """The mean of slots ``start`` to ``upto`` of a top whose first slot is ``first``, from the
+    running counts and sums within the top."""
+    before_count = run_count[start - 1] if start > first else 0.0
+    before_sum = run_sum[start - 1] if start > first else 0.0
+    return float((run_sum[upto] - before_sum) / max(run_count[upto] - before_count, 1.0))
+
+
+@numba.njit(cache=True, nogil=True)
+def seam_cuts(
+    index: npt.NDArray[np.intp],
+    top: IntArray,
+    a: Float64Array,
+    b: Float64Array,
+    seam: npt.NDArray[np.bool_],
+    grey: npt.NDArray[np.uint8],
+    middle_ab: Float64Array,
+    axis_ab: Float64Array,
+    length: Float64Array,
+    width: Float64Array,
+    area: Float64Array,
+    pixels: IntArray,
+    limits: Float64Array,
+) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_], Float64Array]:
+    """Where a seam crosses each top best (:func:`onebox.perception.seams.split_at_seams`):
+    whether it is cut, whether along its length (else across), and where (the cut's offset
+    from the rectangle's middle along that axis).
+
+    Each top's cross-sections along each axis, bins a pixel wide, count their pixels on
+    ``seam`` (flat, the picture's), overall and in each of the outer thirds across; a
+    cross-section is a seam when ``limits`` (min part, min seam length, seam share, over
+    print, end share, shade step) say so and it is not one edge of a strip of tape (its mirror
+    about the middle also a seam, the strip between them in a shade of ``grey`` its own, the
+    flaps either side alike)."""
+    min_part, min_seam, seam_share, over_print, end_share, shade_step = limits
+    n = len(length)
+    count = len(top)
+    on_seam = np.empty(count)
+    shade = np.empty(count)
+    along = np.empty(count)
+    across = np.empty(count)
+    print_share = np.zeros(n)
+    for i in range(count):
+        k = top[i]
+        on_seam[i] = 1.0 if seam[index[i]] else 0.0
+        shade[i] = float(grey[index[i]])
+        da = a[i] - middle_ab[k, 0]
+        db = b[i] - middle_ab[k, 1]
+        along[i] = da * axis_ab[k, 0] + db * axis_ab[k, 1]
+        across[i] = db * axis_ab[k, 0] - da * axis_ab[k, 1]
+        print_share[k] += on_seam[i]
+    step = np.empty(n)
+    for k in range(n):
+        print_share[k] /= max(pixels[k], 1)
+        step[k] = math.sqrt(max(area[k] / max(pixels[k], 1), 1e-12))
+    cut = np.zeros(n, dtype=np.bool_)
+    cut_along = np.zeros(n, dtype=np.bool_)
+    cut_at = np.zeros(n)
+    best = np.zeros(n)
+    for direction in range(2):
+        coordinate = along if direction == 0 else across
+        other = across if direction == 0 else along
+        extent = length if direction == 0 else width
+        span = width if direction == 0 else length
+        offset = np.zeros(n + 1, dtype=np.int64)
+        for k in range(n):
+            offset[k + 1] = offset[k] + max(math.ceil(extent[k] / step[k]) + 2, 1)
+        total = offset[n]
+        owner = np.empty(total, dtype=np.int64)
+        for k in range(n):
+            owner[offset[k] : offset[k + 1]] = k
+        # Per slot: pixels, pixels on a seam, and in the outer third on either side: all of
+        # them and those on a seam; the sum of grey levels.
+        sums = np.zeros((total, 7))
+        slot = np.empty(count, dtype=np.int64)
+        for i in range(count):
+            k = top[i]
+            bins = int(np.floor((coordinate[i] + 0.5 * extent[k]) / step[k])) + 1
+            slot[i] = offset[k] + min(max(bins, 0), offset[k + 1] - offset[k] - 1)
+            row = sums[slot[i]]
+            row[0] += 1.0
+            row[1] += on_seam[i]
+            if other[i] > span[k] / 3.0:
+                row[2] += 1.0
+                row[3] += on_seam[i]
+            if -other[i] > span[k] / 3.0:
+                row[4] += 1.0
+                row[5] += on_seam[i]
+            row[6] += shade[i]
+        strong = np.zeros(total, dtype=np.bool_)
+        share = np.zeros(total)
+        position = np.empty(total)
+        for s in range(total):
+            k = owner[s]
+            share[s] = sums[s, 1] / max(sums[s, 0], 1.0)
+            position[s] = (s - offset[k] - 0.5) * step[k] - 0.5 * extent[k]
+            margin = max(min_part, 3.0 * step[k])
+            strong[s] = (
+                abs(position[s]) < 0.5 * extent[k] - margin
+                and sums[s, 0] >= 3
+                and span[k] >= min_seam
+                and share[s] >= seam_share
+                and share[s] - print_share[k] >= over_print
+                and sums[s, 3] / max(sums[s, 2], 1.0) >= end_share
+                and sums[s, 5] / max(sums[s, 4], 1.0) >= end_share
+            )
+        # Running counts and grey sums within each top: the shade of any run of its slots.
+        run_count = np.empty(total)
+        run_sum = np.empty(total)
+        for s in range(total):
+            first = s == offset[owner[s]]
+            run_count[s] = sums[s, 0] + (0.0 if first else run_count[s - 1])
+            run_sum[s] = sums[s, 6] + (0.0 if first else run_sum[s - 1])
+        peak = np.zeros(n)
+        where = np.zeros(n, dtype=np.int64)
+        for s in range(total):
+            if not strong[s]:
+                continue
+            k = owner[s]
+            first, last = offset[k], offset[k + 1] - 1
+            twin = first + min(max(last - s, 0), last - first)
+            mirrored = strong[twin] or strong[max(twin - 1, 0)] or strong[min(twin + 1, total - 1)]
+            high, low = max(s, twin), min(s, twin)
+            middle = _mean_run(run_count, run_sum, first, low, high)
+            below = _mean_run(run_count, run_sum, first, first, max(low - 1, first))
+            above = _mean_run(run_count, run_sum, first, min(high + 1, last), last)
+            tape = (
+                mirrored
+                and abs(position[s]) > 2.0 * step[k]
+                and abs(above - below) < shade_step
+                and abs(middle - 0.5 * (above + below)) >= shade_step
+            )
+            # The strongest slot of each top (the last among equals).
+            if not tape and share[s] >= peak[k]:
+                peak[k] = share[s]
+                where[k] = s
+        for k in range(n):
+            if peak[k] > 0 and peak[k] > best[k]:
+                best[k] = peak[k]
+                cut[k] = True
+                cut_along[k] = direction == 0
+                cut_at[k] = position[where[k]]
+    return cut, cut_along, cut_at
+
+
 def warm_up() -> None:
     """Compile (or load from the cache) every kernel on a tiny input."""
     label = np.zeros(2, dtype=np.int32)
@@ -436,3 +588,19 @@ def warm_up() -> None:
     flat = np.zeros((2, 2), dtype=np.float32)
     grow(grid, flat, np.ones((2, 2), dtype=np.bool_), flat + 1.0, 1)
     measure_tops(label, a, a, a, a + 1.0, a, one, a, a, np.eye(3), 1.0, 1, a, a, 0.25)
+    one_top = np.ones((1, 2))
+    seam_cuts(
+        np.arange(2),
+        label,
+        a,
+        a,
+        one,
+        np.zeros(2, dtype=np.uint8),
+        one_top,
+        one_top,
+        np.ones(1),
+        np.ones(1),
+        np.ones(1),
+        np.full(1, 2, dtype=np.int32),
+        np.ones(6),
+    )
