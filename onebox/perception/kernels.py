@@ -13,6 +13,7 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
+Float32Array = npt.NDArray[np.float32]
 Float64Array = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int32]
 
@@ -576,6 +577,98 @@ def seam_cuts(
     return cut, cut_along, cut_at
 
 
+@numba.njit(cache=True, nogil=True)
+def surface_heights(
+    depth: Float32Array,
+    slope: Float32Array,
+    weight: Float32Array,
+    total: Float32Array,
+    plane: Float32Array,
+    limits: Float32Array,
+) -> tuple[Float32Array, Float32Array, Float32Array, Float32Array, Float32Array]:
+    """Every pixel's height and noise (:func:`onebox.perception.surface.read_surface`), in
+    float32 as NumPy computes them; its box-filtered depth (``total`` over ``weight``, NaN
+    where fewer readings than the least weight); its height for the 3 x 3 highest and lowest
+    (-inf and inf where no reading, which is neither).
+
+    ``plane`` is the support's normal (optical frame), offset, sigma and 1 / its distance;
+    ``limits`` the noise floor, the cosine of the steepest top, the step in sigmas, the least
+    step and the least box-filter weight."""
+    rows, cols = depth.shape
+    offset, sigma_support, inverse_distance = plane[3], plane[4], plane[5]
+    floor, min_weight = limits[0], limits[4]
+    height = np.empty((rows, cols), dtype=np.float32)
+    sigma = np.empty((rows, cols), dtype=np.float32)
+    smooth = np.empty((rows, cols), dtype=np.float32)
+    for_high = np.empty((rows, cols), dtype=np.float32)
+    for_low = np.empty((rows, cols), dtype=np.float32)
+    for r in range(rows):
+        for c in range(cols):
+            d = depth[r, c]
+            h = d * slope[r, c] + offset
+            height[r, c] = h
+            ratio = d * inverse_distance
+            noise = sigma_support * ratio * ratio
+            # np.maximum: NaN wins.
+            sigma[r, c] = noise if (noise != noise or noise > floor) else floor
+            if weight[r, c] < min_weight:
+                smooth[r, c] = np.nan
+            else:
+                smooth[r, c] = total[r, c] / weight[r, c]
+            finite = np.isfinite(d)
+            for_high[r, c] = h if finite else -np.inf
+            for_low[r, c] = h if finite else np.inf
+    return height, sigma, smooth, for_high, for_low
+
+
+@numba.njit(cache=True, nogil=True)
+def surface_facing(
+    depth: Float32Array,
+    smooth: Float32Array,
+    sigma: Float32Array,
+    high: Float32Array,
+    low: Float32Array,
+    reach: int,
+    lens: Float32Array,
+    plane: Float32Array,
+    limits: Float32Array,
+) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
+    """Whether each pixel faces up (the normal from the gradient of the box-filtered depth
+    ``smooth``, ``reach`` pixels either side) and whether the height steps across its 3 x 3
+    neighbourhood (``high`` less ``low`` beyond the noise): float32 as NumPy computes them,
+    False where no reading. ``lens`` is fx, fy, cx, cy; ``plane`` and ``limits`` as for
+    :func:`surface_heights`."""
+    rows, cols = depth.shape
+    fx, fy, cx, cy = lens[0], lens[1], lens[2], lens[3]
+    n0, n1, n2 = plane[0], plane[1], plane[2]
+    cos_max, step_sigmas, min_step = limits[1], limits[2], limits[3]
+    up = np.zeros((rows, cols), dtype=np.bool_)
+    step = np.zeros((rows, cols), dtype=np.bool_)
+    span = np.float32(2 * reach)
+    for r in range(rows):
+        for c in range(cols):
+            bound = step_sigmas * sigma[r, c]
+            step[r, c] = high[r, c] - low[r, c] > (bound if bound > min_step else min_step)
+    for r in range(reach, rows - reach):
+        v = np.float32(r) - cy
+        for c in range(reach, cols - reach):
+            dz_u = (smooth[r, c + reach] - smooth[r, c - reach]) / span
+            dz_v = (smooth[r + reach, c] - smooth[r - reach, c]) / span
+            u = np.float32(c) - cx
+            nx = -fx * dz_u
+            ny = -fy * dz_v
+            nz = smooth[r, c] + u * dz_u + v * dz_v
+            along = -(nx * n0 + ny * n1 + nz * n2)
+            norm = np.sqrt(nx * nx + ny * ny + nz * nz)
+            up[r, c] = along > cos_max * norm
+    for r in range(rows):
+        for c in range(cols):
+            if not np.isfinite(depth[r, c]):
+                up[r, c] = False
+                step[r, c] = False
+    return up, step
+
+
 def warm_up() -> None:
     """Compile (or load from the cache) every kernel on a tiny input."""
     label = np.zeros(2, dtype=np.int32)
@@ -588,6 +681,10 @@ def warm_up() -> None:
     flat = np.zeros((2, 2), dtype=np.float32)
     grow(grid, flat, np.ones((2, 2), dtype=np.bool_), flat + 1.0, 1)
     measure_tops(label, a, a, a, a + 1.0, a, one, a, a, np.eye(3), 1.0, 1, a, a, 0.25)
+    picture = np.ones((3, 3), dtype=np.float32)
+    lens, plane, limits = (np.ones(k, dtype=np.float32) for k in (4, 6, 5))
+    surface_heights(picture, picture, picture, picture, plane, limits)
+    surface_facing(picture, picture, picture, picture, picture, 1, lens, plane, limits)
     one_top = np.ones((1, 2))
     seam_cuts(
         np.arange(2),

@@ -5,7 +5,7 @@ Contract: :func:`read_surface` takes a depth picture (float32 metres, NaN = no r
 lens and the :class:`~onebox.perception.support.Support`, and returns a :class:`Surface`: every
 pixel's height above the support, whether it faces up (a top, not a side face), its noise
 sigma(z) and the pixels where the height steps between neighbours by more than the noise
-allows. Whole-array work (OpenCV filters); no loop over pixels.
+allows. OpenCV's box filter, then one pass over the pixels (numba).
 
 The physical effects, one line each:
 
@@ -35,7 +35,8 @@ import numpy as np
 import numpy.typing as npt
 
 from onebox.geometry import Intrinsics
-from onebox.perception.support import Support
+from onebox.perception import kernels
+from onebox.perception.support import SIGMA_FLOOR_M, Support
 
 Float32Array = npt.NDArray[np.float32]
 BoolArray = npt.NDArray[np.bool_]
@@ -99,51 +100,70 @@ def height_slope(
 
 
 def read_surface(depth_m: Float32Array, lens: Intrinsics, support: Support) -> Surface:
-    """Heights, noise, facing and steps for every pixel (see the module docstring)."""
+    """Heights, noise, facing and steps for every pixel (see the module docstring): the box
+    filter and the 3 x 3 spread by OpenCV, the rest in two passes
+    (:func:`onebox.perception.kernels.surface_heights`, :func:`~onebox.perception.kernels.
+    surface_facing`)."""
     rows, cols = depth_m.shape
     slope = height_slope(lens, cols, rows, support.normal_camera)
-    height = depth_m * slope + np.float32(support.offset_camera_m)
-    sigma = support.sigma_at(depth_m)
     valid = np.isfinite(depth_m)
     reach = normal_reach(support)
-    up = _faces_up(depth_m, valid, lens, support, reach)
+    lens_f = np.array([lens.fx, lens.fy, lens.cx, lens.cy], dtype=np.float32)
+    plane = np.array(
+        [
+            *support.normal_camera,
+            support.offset_camera_m,
+            support.sigma_m,
+            1.0 / support.distance_m,
+        ],
+        dtype=np.float32,
+    )
+    depth = np.ascontiguousarray(depth_m, dtype=np.float32)
+    weight, total, limits = _box_filtered(depth, valid, reach)
+    height, sigma, smooth, for_high, for_low = kernels.surface_heights(
+        depth, slope, weight, total, plane, limits
+    )
+    # The 3 x 3 spread of heights; no reading counts as neither high nor low.
+    square = np.ones((3, 3), np.uint8)
+    high = np.asarray(cv2.dilate(for_high, square), dtype=np.float32)
+    low = np.asarray(cv2.erode(for_low, square), dtype=np.float32)
+    up, step = kernels.surface_facing(depth, smooth, sigma, high, low, reach, lens_f, plane, limits)
     # A top a few pixels wide has no pixel whose wide window misses its edges: where the noise
     # is small against a pixel's footprint, the gradient across one pixel either side is
     # steady enough to say which way it faces.
     with np.errstate(invalid="ignore"):
         quiet = sigma < QUIET_SHARE * depth_m / np.float32(lens.fx)
     if quiet.any():
-        up |= _faces_up(depth_m, valid, lens, support, 1) & quiet
-    threshold = np.maximum(STEP_SIGMAS * sigma, np.float32(MIN_STEP_M))
-    step = _spread(height, valid) > threshold
-    if not lumpy(support):
-        # Independent errors' tails make steps here and there on a flat top and shatter it: a
-        # step counts where the heights through a 3 x 3 median step too, a pixel away at most
-        # (the median rounds a corner off), or at a crack a pixel wide (which it wipes out).
-        settled = np.asarray(
-            cv2.medianBlur(np.where(valid, height, 0.0).astype(np.float32), 3), np.float32
+        weight, total, limits = _box_filtered(depth, valid, 1)
+        _, _, smooth, _, _ = kernels.surface_heights(depth, slope, weight, total, plane, limits)
+        up_near, _ = kernels.surface_facing(
+            depth, smooth, sigma, high, low, 1, lens_f, plane, limits
         )
-        with np.errstate(invalid="ignore"):
-            crack = (
-                (height < np.roll(height, 1, 1) - threshold)
-                & (height < np.roll(height, -1, 1) - threshold)
-            ) | (
-                (height < np.roll(height, 1, 0) - threshold)
-                & (height < np.roll(height, -1, 0) - threshold)
-            )
-        near = (_spread(settled, valid) > threshold) | crack
-        step &= cv2.dilate(near.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
-    return Surface(height, sigma, up & valid, step & valid, slope, reach)
+        up |= up_near & quiet
+    return Surface(height, sigma, up, step, slope, reach)
 
 
-def _spread(height: Float32Array, valid: BoolArray) -> Float32Array:
-    """The 3 x 3 spread of heights; no reading counts as neither high nor low."""
-    square = np.ones((3, 3), np.uint8)
-    high = cv2.dilate(np.where(valid, height, -np.inf).astype(np.float32), square)
-    low = cv2.erode(np.where(valid, height, np.inf).astype(np.float32), square)
-    with np.errstate(invalid="ignore", over="ignore"):
-        result: Float32Array = high - low
-    return result
+def _box_filtered(
+    depth: Float32Array, valid: BoolArray, reach: int
+) -> tuple[Float32Array, Float32Array, Float32Array]:
+    """The count and the sum of the readings in a window ``reach`` pixels either side of each
+    pixel, and the limits :func:`kernels.surface_heights` and :func:`kernels.surface_facing`
+    take (the least count: half the window)."""
+    window = 2 * reach + 1
+    weight = cv2.boxFilter(valid.astype(np.float32), -1, (window, window), normalize=False)
+    filled = np.where(valid, depth, np.float32(0.0)).astype(np.float32)
+    total = cv2.boxFilter(filled, -1, (window, window), normalize=False)
+    limits = np.array(
+        [
+            SIGMA_FLOOR_M,
+            math.cos(math.radians(MAX_TOP_TILT_DEG)),
+            STEP_SIGMAS,
+            MIN_STEP_M,
+            0.5 * window * window,
+        ],
+        dtype=np.float32,
+    )
+    return np.asarray(weight, dtype=np.float32), np.asarray(total, dtype=np.float32), limits
 
 
 def normal_reach(support: Support) -> int:
@@ -153,39 +173,3 @@ def normal_reach(support: Support) -> int:
     if lumpy(support):
         return min(math.ceil(support.lump_px) + 1, 6)
     return NORMAL_REACH_PX
-
-
-def lumpy(support: Support) -> bool:
-    """Whether the depth's errors come in lumps wider than a pixel, large enough to matter."""
-    return support.lump_px > 1.0 and support.sigma_m > LUMPY_NOISE_M
-
-
-def _faces_up(
-    depth_m: Float32Array, valid: BoolArray, lens: Intrinsics, support: Support, reach: int
-) -> BoolArray:
-    """Whether the surface through each pixel faces up (see the module docstring)."""
-    rows, cols = depth_m.shape
-    window = 2 * reach + 1
-    filled = np.where(valid, depth_m, 0.0).astype(np.float32)
-    weight = cv2.boxFilter(valid.astype(np.float32), -1, (window, window), normalize=False)
-    total = cv2.boxFilter(filled, -1, (window, window), normalize=False)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        smooth = total / weight
-    smooth[weight < 0.5 * window * window] = np.nan
-    dz_u = np.full_like(smooth, np.nan)
-    dz_v = np.full_like(smooth, np.nan)
-    dz_u[:, reach:-reach] = (smooth[:, 2 * reach :] - smooth[:, : -2 * reach]) / (2 * reach)
-    dz_v[reach:-reach, :] = (smooth[2 * reach :, :] - smooth[: -2 * reach, :]) / (2 * reach)
-    u = np.arange(cols, dtype=np.float32)[None, :] - np.float32(lens.cx)
-    v = np.arange(rows, dtype=np.float32)[:, None] - np.float32(lens.cy)
-    nx = -np.float32(lens.fx) * dz_u
-    ny = -np.float32(lens.fy) * dz_v
-    nz = smooth + u * dz_u + v * dz_v
-    # n points away from the camera for a surface facing it; the support's normal toward it.
-    s = support.normal_camera
-    along = -(nx * np.float32(s[0]) + ny * np.float32(s[1]) + nz * np.float32(s[2]))
-    norm = np.sqrt(nx * nx + ny * ny + nz * nz)
-    cos_max = np.float32(math.cos(math.radians(MAX_TOP_TILT_DEG)))
-    with np.errstate(invalid="ignore"):
-        result: BoolArray = along > cos_max * norm
-    return result
