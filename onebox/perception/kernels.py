@@ -669,6 +669,178 @@ def surface_facing(
     return up, step
 
 
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def sight(
+    a: Float64Array,
+    b: Float64Array,
+    height: Float64Array,
+    basis: Float64Array,
+    offset: float,
+    depth: Float32Array,
+    lens: Float64Array,
+) -> tuple[
+    Float64Array, Float64Array, npt.NDArray[np.bool_], npt.NDArray[np.intp], npt.NDArray[np.intp]
+]:
+    """Points at (a, b) in the support plane's coordinates (``basis``: e1, e2 and the normal,
+    rows, in the optical frame; the plane's ``offset``) and ``height`` above it: the depth each
+    would read if seen, the depth seen at its pixel (NaN outside the picture or no reading),
+    whether it is in the picture, and its pixel's row and column (0 outside). ``lens`` is fx,
+    fy, cx, cy."""
+    rows, cols = depth.shape
+    fx, fy, cx, cy = lens[0], lens[1], lens[2], lens[3]
+    count = len(a)
+    z = np.empty(count)
+    seen = np.empty(count)
+    inside = np.empty(count, dtype=np.bool_)
+    vi = np.zeros(count, dtype=np.intp)
+    ui = np.zeros(count, dtype=np.intp)
+    for i in range(count):
+        lift = height[i] - offset
+        x = a[i] * basis[0, 0] + b[i] * basis[1, 0] + lift * basis[2, 0]
+        y = a[i] * basis[0, 1] + b[i] * basis[1, 1] + lift * basis[2, 1]
+        z[i] = a[i] * basis[0, 2] + b[i] * basis[1, 2] + lift * basis[2, 2]
+        u = np.rint(fx * x / z[i] + cx)
+        v = np.rint(fy * y / z[i] + cy)
+        inside[i] = u >= 0 and u < cols and v >= 0 and v < rows and z[i] > 0
+        if inside[i]:
+            ui[i] = int(u)
+            vi[i] = int(v)
+            seen[i] = depth[vi[i], ui[i]]
+        else:
+            seen[i] = np.nan
+    return z, seen, inside, vi, ui
+
+
+@numba.njit(cache=True, nogil=True)
+def top_points(
+    labels: IntArray,
+    depth: Float32Array,
+    height: Float32Array,
+    sigma: Float32Array,
+    across: Float32Array,
+    down: Float32Array,
+    basis: Float64Array,
+) -> tuple[
+    npt.NDArray[np.intp],
+    IntArray,
+    Float64Array,
+    Float64Array,
+    Float64Array,
+    Float64Array,
+    Float64Array,
+    npt.NDArray[np.bool_],
+    Float64Array,
+    Float64Array,
+]:
+    """Every top pixel (``labels`` > 0, in the picture's order): its flat index, its top
+    (label - 1), its point's plane coordinates a and b (``basis``: e1, e2, normal, rows), its
+    height, depth and noise, whether it is on its top's outline (a pixel of another label or
+    none among its 8 neighbours in the picture) and its ray's x/z and y/z (``across`` per
+    column, ``down`` per row)."""
+    rows, cols = labels.shape
+    count = 0
+    for r in range(rows):
+        for c in range(cols):
+            if labels[r, c] > 0:
+                count += 1
+    index = np.empty(count, dtype=np.intp)
+    top = np.empty(count, dtype=np.int32)
+    a = np.empty(count)
+    b = np.empty(count)
+    h = np.empty(count)
+    z = np.empty(count)
+    noise = np.empty(count)
+    edge = np.zeros(count, dtype=np.bool_)
+    ray_x = np.empty(count)
+    ray_y = np.empty(count)
+    i = 0
+    for r in range(rows):
+        for c in range(cols):
+            label = labels[r, c]
+            if label <= 0:
+                continue
+            index[i] = r * cols + c
+            top[i] = label - 1
+            zi = np.float64(depth[r, c])
+            x = across[c] * zi
+            y = down[r] * zi
+            a[i] = basis[0, 0] * x + basis[0, 1] * y + basis[0, 2] * zi
+            b[i] = basis[1, 0] * x + basis[1, 1] * y + basis[1, 2] * zi
+            h[i] = height[r, c]
+            z[i] = zi
+            noise[i] = sigma[r, c]
+            for rr in range(max(r - 1, 0), min(r + 2, rows)):
+                for cc in range(max(c - 1, 0), min(c + 2, cols)):
+                    if labels[rr, cc] != label:
+                        edge[i] = True
+            ray_x[i] = across[c]
+            ray_y[i] = down[r]
+            i += 1
+    return index, top, a, b, h, z, noise, edge, ray_x, ray_y
+
+
+@numba.njit(cache=True, nogil=True)
+def standing(
+    height: Float32Array,
+    sigma: Float32Array,
+    up: npt.NDArray[np.bool_],
+    step: npt.NDArray[np.bool_],
+    min_height: float,
+    max_height: float,
+) -> tuple[npt.NDArray[np.uint8], npt.NDArray[np.bool_], Float32Array]:
+    """Steps 1 and 2 of :mod:`onebox.perception.tops`, per pixel, in float32 as NumPy
+    computes them: which pixels stand (above ``min_height`` and 4 sigma, below
+    ``max_height``: "open" to grow over), which of them also face up and are on no step (the
+    regions' cores, 1), and how far in height a region grows to its neighbours (3 sigma,
+    2 mm at least)."""
+    rows, cols = height.shape
+    low = np.float32(min_height)
+    high = np.float32(max_height)
+    core = np.zeros((rows, cols), dtype=np.uint8)
+    open_ = np.zeros((rows, cols), dtype=np.bool_)
+    tolerance = np.empty((rows, cols), dtype=np.float32)
+    least = np.float32(0.002)
+    for r in range(rows):
+        for c in range(cols):
+            noise = sigma[r, c]
+            four = np.float32(4.0) * noise
+            bound = four if (four != four or four > low) else low
+            h = height[r, c]
+            stands = h > bound and h < high
+            open_[r, c] = stands
+            if stands and up[r, c] and not step[r, c]:
+                core[r, c] = 1
+            three = np.float32(3.0) * noise
+            tolerance[r, c] = three if (three != three or three > least) else least
+    return core, open_, tolerance
+
+
+@numba.njit(cache=True, nogil=True)
+def drop_small(labels: IntArray, min_pixels: int) -> IntArray:
+    """``labels`` without the regions of fewer than ``min_pixels`` pixels, the rest numbered
+    1, 2, ... in their order."""
+    rows, cols = labels.shape
+    count = 0
+    for r in range(rows):
+        for c in range(cols):
+            count = max(count, labels[r, c])
+    sizes = np.zeros(count + 1, dtype=np.int64)
+    for r in range(rows):
+        for c in range(cols):
+            sizes[labels[r, c]] += 1
+    renumber = np.zeros(count + 1, dtype=np.int32)
+    kept = 0
+    for k in range(1, count + 1):
+        if sizes[k] >= min_pixels:
+            kept += 1
+            renumber[k] = kept
+    result = np.empty((rows, cols), dtype=np.int32)
+    for r in range(rows):
+        for c in range(cols):
+            result[r, c] = renumber[labels[r, c]]
+    return result
+
+
 def warm_up() -> None:
     """Compile (or load from the cache) every kernel on a tiny input."""
     label = np.zeros(2, dtype=np.int32)
@@ -685,6 +857,10 @@ def warm_up() -> None:
     lens, plane, limits = (np.ones(k, dtype=np.float32) for k in (4, 6, 5))
     surface_heights(picture, picture, picture, picture, plane, limits)
     surface_facing(picture, picture, picture, picture, picture, 1, lens, plane, limits)
+    sight(a, a, a, np.eye(3), 1.0, picture, np.ones(4))
+    top_points(grid, flat, flat, flat, flat[0], flat[0], np.eye(3))
+    standing(flat, flat, one.reshape(1, 2), one.reshape(1, 2), 0.01, np.inf)
+    drop_small(grid, 2)
     one_top = np.ones((1, 2))
     seam_cuts(
         np.arange(2),

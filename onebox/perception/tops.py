@@ -126,21 +126,19 @@ def plane_basis(support: Support) -> Float64Array:
 def standing_regions(surface: Surface, min_height_m: float, max_height_m: float | None) -> IntArray:
     """Steps 1 and 2 of the module docstring: the labels of connected upward-facing regions."""
     height = surface.height_m
-    with np.errstate(invalid="ignore"):
-        standing = surface.up & (height > np.maximum(min_height_m, 4.0 * surface.sigma_m))
-        if max_height_m is not None:
-            standing &= height < max_height_m
-    core = (standing & ~surface.step).astype(np.uint8)
-    core = cv2.morphologyEx(core, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
-    _, found = cv2.connectedComponents(core, connectivity=4, ltype=cv2.CV_32S)
+    core, open_, tolerance = kernels.standing(
+        height,
+        surface.sigma_m,
+        surface.up,
+        surface.step,
+        min_height_m,
+        np.inf if max_height_m is None else max_height_m,
+    )
+    opened = cv2.morphologyEx(core, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+    _, found = cv2.connectedComponents(opened, connectivity=4, ltype=cv2.CV_32S)
     labels: IntArray = np.asarray(found, dtype=np.int32)
     # Grow the regions back over the pixels cut at steps and the edge pixels whose normal the
     # smoothing turned, where at the height of the region beside them.
-    with np.errstate(invalid="ignore"):
-        open_ = (height > np.maximum(min_height_m, 4.0 * surface.sigma_m)) & (
-            height < (np.inf if max_height_m is None else max_height_m)
-        )
-    tolerance = np.maximum(3.0 * surface.sigma_m, np.float32(0.002)).astype(np.float32)
     kernels.grow(labels, height, open_, tolerance, surface.reach_px + 2)
     return labels
 
@@ -155,14 +153,7 @@ def find_tops(
     max_height_m: float | None = None,
 ) -> Tops:
     """Every top in the picture (see the module docstring)."""
-    labels = standing_regions(surface, min_height_m, max_height_m)
-    count = int(labels.max())
-    sizes = np.bincount(labels.ravel(), minlength=count + 1)
-    keep = sizes >= MIN_PIXELS
-    keep[0] = False
-    renumber = np.zeros(count + 1, dtype=np.int32)
-    renumber[keep] = np.arange(1, int(keep.sum()) + 1, dtype=np.int32)
-    labels = renumber[labels]
+    labels = kernels.drop_small(standing_regions(surface, min_height_m, max_height_m), MIN_PIXELS)
     seam = None if colour is None else seams.seam_map(colour, depth_m, lens)
     basis = plane_basis(support)
     tops = _measure(labels, depth_m, surface, lens, basis)
@@ -262,19 +253,22 @@ def sight(
     """Points at (a, b) in the support plane's coordinates and ``height_m`` above it: the
     depth each would read if seen, the depth seen at its pixel (NaN outside the picture or no
     reading), whether it is in the picture, and its pixel (row, column)."""
-    rows, cols = depth_m.shape
-    e1, e2, normal = basis
-    lift = (height_m - support.offset_camera_m)[..., None]
-    point = ab[..., :1] * e1 + ab[..., 1:] * e2 + lift * normal
-    z_expected = point[..., 2]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        u = np.rint(lens.fx * point[..., 0] / z_expected + lens.cx)
-        v = np.rint(lens.fy * point[..., 1] / z_expected + lens.cy)
-    inside = (u >= 0) & (u < cols) & (v >= 0) & (v < rows) & (z_expected > 0)
-    ui = np.where(inside, u, 0).astype(np.intp)
-    vi = np.where(inside, v, 0).astype(np.intp)
-    seen = np.where(inside, depth_m[vi, ui], np.nan).astype(np.float64)
-    return z_expected, seen, inside, (vi, ui)
+    shape = np.broadcast_shapes(ab.shape[:-1], np.shape(height_m))
+    z, seen, inside, vi, ui = kernels.sight(
+        np.broadcast_to(ab[..., 0], shape).ravel(),
+        np.broadcast_to(ab[..., 1], shape).ravel(),
+        np.broadcast_to(height_m, shape).ravel(),
+        basis,
+        support.offset_camera_m,
+        depth_m,
+        np.array([lens.fx, lens.fy, lens.cx, lens.cy]),
+    )
+    return (
+        z.reshape(shape),
+        seen.reshape(shape),
+        inside.reshape(shape),
+        (vi.reshape(shape), ui.reshape(shape)),
+    )
 
 
 @dataclass(frozen=True)
@@ -289,28 +283,6 @@ class Points:
     z: Float64Array
 
 
-def points_of(
-    labels: IntArray,
-    depth_m: Float32Array,
-    surface: Surface,
-    lens: Intrinsics,
-    basis: Float64Array,
-) -> Points:
-    """Every top pixel's point in the support plane's coordinates."""
-    rows, cols = labels.shape
-    index = np.flatnonzero(labels)
-    top = labels.ravel()[index] - 1
-    r, c = np.divmod(index, cols)
-    across, down = _rays(lens, cols, rows)
-    z = depth_m.ravel()[index].astype(np.float64)
-    x = across[c] * z
-    y = down[r] * z
-    a = basis[0, 0] * x + basis[0, 1] * y + basis[0, 2] * z
-    b = basis[1, 0] * x + basis[1, 1] * y + basis[1, 2] * z
-    h = surface.height_m.ravel()[index].astype(np.float64)
-    return Points(index, top.astype(np.int32), a, b, h, z)
-
-
 def _measure(
     labels: IntArray,
     depth_m: Float32Array,
@@ -318,19 +290,15 @@ def _measure(
     lens: Intrinsics,
     basis: Float64Array,
 ) -> Tops:
-    """Step 5 of the module docstring for every top (:func:`kernels.measure_tops`)."""
+    """Step 5 of the module docstring for every top (:func:`kernels.top_points`, then
+    :func:`kernels.measure_tops`)."""
     rows, cols = labels.shape
     n = int(labels.max())
-    pts = points_of(labels, depth_m, surface, lens, basis)
-    # The outline: pixels with another label (or none) in their 3 x 3 neighbourhood.
-    flat_labels = labels.astype(np.float32)
-    square = np.ones((3, 3), np.uint8)
-    edge = (labels > 0) & (
-        (cv2.erode(flat_labels, square) != flat_labels)
-        | (cv2.dilate(flat_labels, square) != flat_labels)
-    )
     across, down = _rays(lens, cols, rows)
-    r, c = np.divmod(pts.index, cols)
+    index, top, a, b, h, z, sigma_px, edge, ray_x, ray_y = kernels.top_points(
+        labels, depth_m, surface.height_m, surface.sigma_m, across, down, basis
+    )
+    pts = Points(index, top, a, b, h, z)
     (
         pixels,
         mean_z,
@@ -349,15 +317,15 @@ def _measure(
         tilt,
         slope,
     ) = kernels.measure_tops(
-        pts.top,
-        pts.a,
-        pts.b,
-        pts.h,
-        pts.z,
-        surface.sigma_m.ravel()[pts.index].astype(np.float64),
-        edge.ravel()[pts.index],
-        across[c].astype(np.float64),
-        down[r].astype(np.float64),
+        top,
+        a,
+        b,
+        h,
+        z,
+        sigma_px,
+        edge,
+        ray_x,
+        ray_y,
         basis,
         lens.fx * lens.fy,
         n,
