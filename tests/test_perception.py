@@ -722,27 +722,35 @@ def test_the_kernels_grow_as_scipy_dilates():
 
 
 def test_the_kernels_measure_what_numpy_does():
-    """kernels.extents and extents_at_angles: each top's min and max along (turned) axes."""
+    """kernels.extents: each top's min and max along two axes; kernels.rectangle_angles: the
+    angle (of those tried, then the fine ones about the best) whose rectangle round a top's
+    points is smallest, as NumPy finds it, and the rectangle's own turn."""
     rng = np.random.default_rng(0)
     label = rng.integers(-1, 7, 500).astype(np.int32)
     a, b = rng.normal(size=500), rng.normal(size=500)
-    angles = np.radians([0.0, 30.0, 89.0])
     kernels.warm_up()
-    box, spans = kernels.extents(label, a, b, 7), kernels.extents_at_angles(
-        np.maximum(label, 0), a, b, label < 5, np.tile(angles, (7, 1)))  # fmt: skip
+    box = kernels.extents(label, a, b, 7)
     for k in range(7):
         mine = label == k
         assert box[k] == pytest.approx([a[mine].min(), a[mine].max(), b[mine].min(),
                                         b[mine].max()])  # fmt: skip
-        ours = (np.maximum(label, 0) == k) & (label < 5)
-        if not ours.any():
-            continue
-        for j, t in enumerate(angles):
-            p, q = (
-                a[ours] * np.cos(t) + b[ours] * np.sin(t),
-                b[ours] * np.cos(t) - a[ours] * np.sin(t),
-            )
-            assert spans[k, j] == pytest.approx([p.min(), p.max(), q.min(), q.max()])
+    turns = (10.0, 37.0, 71.0)
+    along, across = rng.uniform(-0.2, 0.2, (3, 300)), rng.uniform(-0.05, 0.05, (3, 300))
+    t = np.radians(turns)[:, None]
+    pa = along * np.cos(t) - across * np.sin(t)
+    pb = along * np.sin(t) + across * np.cos(t)
+    coarse, fine = np.radians(np.arange(0.0, 90.0, 5.0)), np.radians(np.arange(-4.5, 4.6, 0.5))
+    found = kernels.rectangle_angles(np.arange(0, 901, 300), pa.ravel(), pb.ravel(), coarse, fine)
+    for k, turn in enumerate(turns):
+
+        def area(angle: float, k: int = k) -> float:
+            p = pa[k] * np.cos(angle) + pb[k] * np.sin(angle)
+            q = pb[k] * np.cos(angle) - pa[k] * np.sin(angle)
+            return float(np.ptp(p) * np.ptp(q))
+
+        tried = coarse[np.argmin([area(x) for x in coarse])] + fine
+        assert found[k] == tried[np.argmin([area(x) for x in tried])]
+        assert abs((np.degrees(found[k]) - turn + 45.0) % 90.0 - 45.0) < 1.5
 
 
 # --- a stream of pictures ------------------------------------------------------------------------

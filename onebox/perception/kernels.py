@@ -89,122 +89,73 @@ def grow(
 
 
 @numba.njit(cache=True, nogil=True)
-def _smallest_rectangle(
-    top: IntArray,
+def rectangle_angles(
+    start: npt.NDArray[np.intp],
     a: Float64Array,
     b: Float64Array,
-    on_edge: npt.NDArray[np.bool_],
-    n: int,
     angles: Float64Array,
     fine_angles: Float64Array,
 ) -> Float64Array:
-    """Each top's angle whose rectangle round its edge pixels is smallest: tried at
-    ``angles``, then at ``fine_angles`` about the best of them (the first best wins ties)."""
+    """Each top's angle whose rectangle round its points (top k's are ``start[k]`` to
+    ``start[k + 1]``) is smallest: ``angles`` tried, then ``fine_angles`` about the best of
+    them (the first smallest wins; the first tried if none has an area)."""
+    n = len(start) - 1
     best = np.zeros(n)
-    for search in range(2):
-        m = len(angles) if search == 0 else len(fine_angles)
-        tried = np.empty((n, m))
-        for k in range(n):
-            for j in range(m):
-                tried[k, j] = angles[j] if search == 0 else best[k] + fine_angles[j]
-        spans = extents_at_angles(top, a, b, on_edge, tried)
-        for k in range(n):
+    for k in range(n):
+        for search in range(2):
+            tried = angles if search == 0 else best[k] + fine_angles
             smallest = np.inf
-            at = 0
-            for j in range(m):
-                area = (spans[k, j, 1] - spans[k, j, 0]) * (spans[k, j, 3] - spans[k, j, 2])
+            at = tried[0]
+            for angle in tried:
+                cos = np.cos(angle)
+                sin = np.sin(angle)
+                low_p, high_p, low_q, high_q = np.inf, -np.inf, np.inf, -np.inf
+                for i in range(start[k], start[k + 1]):
+                    p = a[i] * cos + b[i] * sin
+                    q = b[i] * cos - a[i] * sin
+                    low_p = min(low_p, p)
+                    high_p = max(high_p, p)
+                    low_q = min(low_q, q)
+                    high_q = max(high_q, q)
+                area = (high_p - low_p) * (high_q - low_q)
                 if np.isfinite(area) and area < smallest:
                     smallest = area
-                    at = j
-            best[k] = tried[k, at]
+                    at = angle
+            best[k] = at
     return best
 
 
 @numba.njit(cache=True, nogil=True)
-def extents_at_angles(
-    label: IntArray,
-    a: Float64Array,
-    b: Float64Array,
-    use: npt.NDArray[np.bool_],
-    angles: Float64Array,
-) -> Float64Array:
-    """For each top and each of its angles (``angles`` is (count, m): each top's own), the
-    extents of its points where ``use`` holds along the two axes turned by that angle: shape
-    (count, m, 4) = (min along, max along, min across, max across)."""
-    count, n_angles = angles.shape
-    out = np.empty((count, n_angles, 4))
-    out[:, :, 0] = np.inf
-    out[:, :, 1] = -np.inf
-    out[:, :, 2] = np.inf
-    out[:, :, 3] = -np.inf
-    cos = np.cos(angles)
-    sin = np.sin(angles)
-    for i in range(label.shape[0]):
-        if not use[i]:
-            continue
-        k = label[i]
-        for j in range(n_angles):
-            p = a[i] * cos[k, j] + b[i] * sin[k, j]
-            q = b[i] * cos[k, j] - a[i] * sin[k, j]
-            if p < out[k, j, 0]:
-                out[k, j, 0] = p
-            if p > out[k, j, 1]:
-                out[k, j, 1] = p
-            if q < out[k, j, 2]:
-                out[k, j, 2] = q
-            if q > out[k, j, 3]:
-                out[k, j, 3] = q
-    return out
-
-
-@numba.njit(cache=True, nogil=True)
 def _profile_keep(
-    top: IntArray,
-    coordinate: Float64Array,
-    pixels: npt.NDArray[np.int64],
-    step: Float64Array,
-    share: float,
+    coordinate: Float64Array, lo: int, hi: int, step: float, share: float
 ) -> npt.NDArray[np.bool_]:
-    """Whether each pixel's cross-section along ``coordinate`` (bins ``step`` wide from its
-    top's least coordinate) holds at least ``share`` of its top's typical one (its pixels over
-    its cross-sections that hold any)."""
-    n = len(pixels)
-    start = np.full(n, np.inf)
-    end = np.full(n, -np.inf)
-    for i in range(len(top)):
-        k = top[i]
-        if coordinate[i] < start[k]:
-            start[k] = coordinate[i]
-        if coordinate[i] > end[k]:
-            end[k] = coordinate[i]
-    offset = np.zeros(n + 1, dtype=np.int64)
-    for k in range(n):
-        width = 0
-        if np.isfinite(end[k]):
-            width = int(np.floor((end[k] - start[k]) / step[k])) + 1
-        offset[k + 1] = offset[k] + width
-    counts = np.zeros(offset[n], dtype=np.int64)
-    slot = np.empty(len(top), dtype=np.int64)
-    for i in range(len(top)):
-        k = top[i]
-        slot[i] = offset[k] + int(np.floor((coordinate[i] - start[k]) / step[k]))
-        counts[slot[i]] += 1
-    typical = np.empty(n)
-    for k in range(n):
-        occupied = 0
-        for s in range(offset[k], offset[k + 1]):
-            if counts[s] > 0:
-                occupied += 1
-        typical[k] = pixels[k] / max(occupied, 1)
-    keep = np.empty(len(top), dtype=np.bool_)
-    for i in range(len(top)):
-        keep[i] = counts[slot[i]] >= share * typical[top[i]]
+    """Whether each of one top's pixels (``lo`` to ``hi``) has a cross-section along
+    ``coordinate`` (bins ``step`` wide from the top's least coordinate) holding at least
+    ``share`` of the top's typical one (its pixels over its cross-sections that hold any)."""
+    start, end = np.inf, -np.inf
+    for i in range(lo, hi):
+        start = min(start, coordinate[i])
+        end = max(end, coordinate[i])
+    width = int(np.floor((end - start) / step)) + 1 if np.isfinite(end) else 0
+    counts = np.zeros(width, dtype=np.int64)
+    slot = np.empty(hi - lo, dtype=np.int64)
+    for i in range(lo, hi):
+        slot[i - lo] = int(np.floor((coordinate[i] - start) / step))
+        counts[slot[i - lo]] += 1
+    occupied = 0
+    for s in range(width):
+        if counts[s] > 0:
+            occupied += 1
+    typical = (hi - lo) / max(occupied, 1)
+    keep = np.empty(hi - lo, dtype=np.bool_)
+    for i in range(hi - lo):
+        keep[i] = counts[slot[i]] >= share * typical
     return keep
 
 
 @numba.njit(cache=True, nogil=True)
 def measure_tops(
-    top: IntArray,
+    start: npt.NDArray[np.intp],
     a: Float64Array,
     b: Float64Array,
     h: Float64Array,
@@ -215,208 +166,195 @@ def measure_tops(
     ray_y: Float64Array,
     basis: Float64Array,
     fx_fy: float,
-    n: int,
     angles: Float64Array,
     fine_angles: Float64Array,
     profile_share: float,
 ) -> tuple[Float64Array, ...]:
-    """Every top measured from its pixels (step 5 of :mod:`onebox.perception.tops`), a few
-    passes over the pixels whatever the number of tops.
+    """Every top measured from its pixels (step 5 of :mod:`onebox.perception.tops`); top k's
+    pixels are ``start[k]`` to ``start[k + 1]`` (as :func:`top_points` orders them).
 
-    Per pixel: its top, its plane coordinates ``a``, ``b``, its height ``h``, depth ``z``, the
-    noise ``sigma`` there, whether it is on its top's outline, and its ray's x/z and y/z;
-    ``basis`` is e1, e2 and the support normal (rows), ``fx_fy`` the lens's fx fy.
+    Per pixel: its plane coordinates ``a``, ``b``, its height ``h``, depth ``z``, the noise
+    ``sigma`` there, whether it is on its top's outline, and its ray's x/z and y/z; ``basis``
+    is e1, e2 and the support normal (rows), ``fx_fy`` the lens's fx fy. Each top's sums run
+    over its pixels in order, as ``np.bincount`` would add them.
 
     Returns per top (n): pixels, mean depth, mean sigma, height at the rectangle's middle,
     middle (n, 2), axis (n, 2), length, width, area, fill, corners, rms, sag, sag share,
     tilt (degrees) and slope (n, 2), as :class:`onebox.perception.tops.Tops` holds them."""
-    count = len(top)
-    pixels = np.zeros(n, dtype=np.int64)
-    sums = np.zeros((n, 5))
-    for i in range(count):
-        k = top[i]
-        pixels[k] += 1
-        sums[k, 0] += a[i]
-        sums[k, 1] += b[i]
-        sums[k, 2] += h[i]
-        sums[k, 3] += z[i]
-        sums[k, 4] += sigma[i]
-    safe = np.maximum(pixels, 1).astype(np.float64)
-    means = np.empty((n, 5))
+    n = len(start) - 1
+    # The outline's points, top by top, for the rectangle's angle.
+    edges = 0
+    for i in range(len(a)):
+        if on_edge[i]:
+            edges += 1
+    edge_a = np.empty(edges)
+    edge_b = np.empty(edges)
+    edge_start = np.zeros(n + 1, dtype=np.intp)
+    e = 0
     for k in range(n):
-        for j in range(5):
-            means[k, j] = sums[k, j] / safe[k]
-    # The top's plane, h = alpha a + beta b + gamma, by least squares about its middle.
-    moments = np.zeros((n, 5))  # aa, ab, bb, ah, bh
-    for i in range(count):
-        k = top[i]
-        da = a[i] - means[k, 0]
-        db = b[i] - means[k, 1]
-        dh = h[i] - means[k, 2]
-        moments[k, 0] += da * da
-        moments[k, 1] += da * db
-        moments[k, 2] += db * db
-        moments[k, 3] += da * dh
-        moments[k, 4] += db * dh
-    alpha = np.zeros(n)
-    beta = np.zeros(n)
-    for k in range(n):
-        saa = moments[k, 0] / safe[k]
-        sab = moments[k, 1] / safe[k]
-        sbb = moments[k, 2] / safe[k]
-        sah = moments[k, 3] / safe[k]
-        sbh = moments[k, 4] / safe[k]
-        det = saa * sbb - sab * sab
-        if det > 1e-18:
-            alpha[k] = (sah * sbb - sbh * sab) / det
-            beta[k] = (sbh * saa - sah * sab) / det
-    residual = np.empty(count)
-    squared = np.zeros(n)
-    for i in range(count):
-        k = top[i]
-        da = a[i] - means[k, 0]
-        db = b[i] - means[k, 1]
-        dh = h[i] - means[k, 2]
-        residual[i] = dh - alpha[k] * da - beta[k] * db
-        squared[k] += residual[i] * residual[i]
-    rms = np.sqrt(squared / safe)
-    angle = _smallest_rectangle(top, a, b, on_edge, n, angles, fine_angles)
-    cos = np.cos(angle)
-    sin = np.sin(angle)
-    # Each pixel's footprint on the support plane: z^2 / (fx fy |m . ray|) on the top's own
-    # plane (normal m ~ n - alpha e1 - beta e2), times m . n to lay it on the support's.
-    p = np.empty(count)
-    q = np.empty(count)
-    footprint = np.empty(count)
-    summed = np.zeros(n)
-    for i in range(count):
-        k = top[i]
-        p[i] = a[i] * cos[k] + b[i] * sin[k]
-        q[i] = b[i] * cos[k] - a[i] * sin[k]
-        along_e1 = ray_x[i] * basis[0, 0] + ray_y[i] * basis[0, 1] + basis[0, 2]
-        along_e2 = ray_x[i] * basis[1, 0] + ray_y[i] * basis[1, 1] + basis[1, 2]
-        along_n = ray_x[i] * basis[2, 0] + ray_y[i] * basis[2, 1] + basis[2, 2]
-        facing = along_n - alpha[k] * along_e1 - beta[k] * along_e2
-        footprint[i] = z[i] * z[i] / (fx_fy * max(abs(facing), 0.05))
-        summed[k] += footprint[i]
-    step = np.sqrt(summed / safe)  # one pixel's side on the plane
-    keep = _profile_keep(top, p, pixels, step, profile_share)
-    keep &= _profile_keep(top, q, pixels, step, profile_share)
-    kept = np.zeros(n, dtype=np.int64)
-    for i in range(count):
-        if keep[i]:
-            kept[top[i]] += 1
-    box = np.empty((n, 4))
-    box[:, 0] = np.inf
-    box[:, 1] = -np.inf
-    box[:, 2] = np.inf
-    box[:, 3] = -np.inf
+        for i in range(start[k], start[k + 1]):
+            if on_edge[i]:
+                edge_a[e] = a[i]
+                edge_b[e] = b[i]
+                e += 1
+        edge_start[k + 1] = e
+    angle = rectangle_angles(edge_start, edge_a, edge_b, angles, fine_angles)
+    pixels = np.zeros(n)
+    mean_z = np.zeros(n)
+    mean_sigma = np.zeros(n)
+    height = np.zeros(n)
+    middle = np.zeros((n, 2))
+    axis_ab = np.zeros((n, 2))
+    length = np.zeros(n)
+    width = np.zeros(n)
     area = np.zeros(n)
-    for i in range(count):
-        k = top[i]
-        if kept[k] > 0 and not keep[i]:
-            continue
-        keep[i] = True
-        box[k, 0] = min(box[k, 0], p[i])
-        box[k, 1] = max(box[k, 1], p[i])
-        box[k, 2] = min(box[k, 2], q[i])
-        box[k, 3] = max(box[k, 3], q[i])
-        area[k] += footprint[i]
-    for k in range(n):
-        box[k, 0] -= 0.5 * step[k]
-        box[k, 1] += 0.5 * step[k]
-        box[k, 2] -= 0.5 * step[k]
-        box[k, 3] += 0.5 * step[k]
-    extent_p = box[:, 1] - box[:, 0]
-    extent_q = box[:, 3] - box[:, 2]
-    mid_p = 0.5 * (box[:, 0] + box[:, 1])
-    mid_q = 0.5 * (box[:, 2] + box[:, 3])
-    # How full the rectangle's corners are: corner squares a fifth of the width on a side
-    # (three pixels at least), a pixel in from the rectangle's sides.
-    corner = np.maximum(0.2 * np.minimum(extent_p, extent_q), 3.0 * step)
+    fill = np.zeros(n)
     corners = np.zeros(n)
-    for i in range(count):
-        k = top[i]
-        if not keep[i]:
-            continue
-        dp = 0.5 * extent_p[k] - step[k] - abs(p[i] - mid_p[k])
-        dq = 0.5 * extent_q[k] - step[k] - abs(q[i] - mid_q[k])
-        if dp >= 0 and dp < corner[k] and dq >= 0 and dq < corner[k]:
-            corners[k] += footprint[i]
-    corners /= 4.0 * corner * corner
-    # Lengths on the top's own plane (it may lean): stretch by the slope along each axis.
-    stretched_p = np.empty(n)
-    stretched_q = np.empty(n)
-    for k in range(n):
-        stretched_p[k] = extent_p[k] * math.hypot(1.0, alpha[k] * cos[k] + beta[k] * sin[k])
-        stretched_q[k] = extent_q[k] * math.hypot(1.0, beta[k] * cos[k] - alpha[k] * sin[k])
-    # How the top curves off its plane along each axis: the residuals' quadratic part over the
-    # middle half of the top, as the sag from its middle to that half's edges.
+    rms = np.zeros(n)
     sag = np.zeros(n)
     sag_share = np.zeros(n)
-    for axis in range(2):
-        coordinate = p if axis == 0 else q
-        mid = mid_p if axis == 0 else mid_q
-        extent = stretched_p if axis == 0 else stretched_q
-        inner = np.zeros((n, 5))  # count, mean offset^2, mean residual, then two products
-        for i in range(count):
-            k = top[i]
-            offset = coordinate[i] - mid[k]
-            if abs(offset) < extent[k] / 4:
-                inner[k, 0] += 1.0
-                inner[k, 1] += offset * offset
-                inner[k, 2] += residual[i]
-        for k in range(n):
-            inner[k, 0] = max(inner[k, 0], 1.0)
-            inner[k, 1] /= inner[k, 0]
-            inner[k, 2] /= inner[k, 0]
-        for i in range(count):
-            k = top[i]
-            offset = coordinate[i] - mid[k]
-            if abs(offset) < extent[k] / 4:
-                centred = offset * offset - inner[k, 1]
-                inner[k, 3] += centred * (residual[i] - inner[k, 2])
-                inner[k, 4] += centred * centred
-        for k in range(n):
-            curve = (inner[k, 3] / inner[k, 0]) / max(inner[k, 4] / inner[k, 0], 1e-18)
-            this = abs(curve) * (extent[k] / 4) ** 2
-            share = this / max(extent[k] / 2, 1e-9)
+    tilt = np.zeros(n)
+    slope = np.zeros((n, 2))
+    residual = np.empty(len(a))
+    p = np.empty(len(a))
+    q = np.empty(len(a))
+    footprint = np.empty(len(a))
+    for k in range(n):
+        lo, hi = start[k], start[k + 1]
+        pixels[k] = hi - lo
+        safe = max(hi - lo, 1.0)
+        sum_a = sum_b = sum_h = sum_z = sum_sigma = 0.0
+        for i in range(lo, hi):
+            sum_a += a[i]
+            sum_b += b[i]
+            sum_h += h[i]
+            sum_z += z[i]
+            sum_sigma += sigma[i]
+        mean_a, mean_b, mean_h = sum_a / safe, sum_b / safe, sum_h / safe
+        mean_z[k], mean_sigma[k] = sum_z / safe, sum_sigma / safe
+        # The top's plane, h = alpha a + beta b + gamma, by least squares about its middle.
+        saa = sab = sbb = sah = sbh = 0.0
+        for i in range(lo, hi):
+            da, db, dh = a[i] - mean_a, b[i] - mean_b, h[i] - mean_h
+            saa += da * da
+            sab += da * db
+            sbb += db * db
+            sah += da * dh
+            sbh += db * dh
+        saa, sab, sbb, sah, sbh = saa / safe, sab / safe, sbb / safe, sah / safe, sbh / safe
+        det = saa * sbb - sab * sab
+        alpha = beta = 0.0
+        if det > 1e-18:
+            alpha = (sah * sbb - sbh * sab) / det
+            beta = (sbh * saa - sah * sab) / det
+        squared = 0.0
+        for i in range(lo, hi):
+            da, db, dh = a[i] - mean_a, b[i] - mean_b, h[i] - mean_h
+            residual[i] = dh - alpha * da - beta * db
+            squared += residual[i] * residual[i]
+        rms[k] = np.sqrt(squared / safe)
+        cos, sin = np.cos(angle[k]), np.sin(angle[k])
+        # Each pixel's footprint on the support plane: z^2 / (fx fy |m . ray|) on the top's
+        # own plane (normal m ~ n - alpha e1 - beta e2), times m . n to lay it on the support's.
+        summed = 0.0
+        for i in range(lo, hi):
+            p[i] = a[i] * cos + b[i] * sin
+            q[i] = b[i] * cos - a[i] * sin
+            along_e1 = ray_x[i] * basis[0, 0] + ray_y[i] * basis[0, 1] + basis[0, 2]
+            along_e2 = ray_x[i] * basis[1, 0] + ray_y[i] * basis[1, 1] + basis[1, 2]
+            along_n = ray_x[i] * basis[2, 0] + ray_y[i] * basis[2, 1] + basis[2, 2]
+            facing = along_n - alpha * along_e1 - beta * along_e2
+            footprint[i] = z[i] * z[i] / (fx_fy * max(abs(facing), 0.05))
+            summed += footprint[i]
+        step = np.sqrt(summed / safe)  # one pixel's side on the plane
+        # The extent along each axis over the pixels whose cross-sections are not strays
+        # (all of them if none is kept).
+        keep = _profile_keep(p, lo, hi, step, profile_share)
+        keep &= _profile_keep(q, lo, hi, step, profile_share)
+        if not keep.any():
+            keep[:] = True
+        low_p, high_p, low_q, high_q = np.inf, -np.inf, np.inf, -np.inf
+        for i in range(lo, hi):
+            if keep[i - lo]:
+                low_p = min(low_p, p[i])
+                high_p = max(high_p, p[i])
+                low_q = min(low_q, q[i])
+                high_q = max(high_q, q[i])
+                area[k] += footprint[i]
+        low_p -= 0.5 * step
+        high_p += 0.5 * step
+        low_q -= 0.5 * step
+        high_q += 0.5 * step
+        extent_p, extent_q = high_p - low_p, high_q - low_q
+        mid_p, mid_q = 0.5 * (low_p + high_p), 0.5 * (low_q + high_q)
+        # How full the rectangle's corners are: corner squares a fifth of the width on a side
+        # (three pixels at least), a pixel in from the rectangle's sides.
+        corner = max(0.2 * min(extent_p, extent_q), 3.0 * step)
+        in_corners = 0.0
+        for i in range(lo, hi):
+            if not keep[i - lo]:
+                continue
+            dp = 0.5 * extent_p - step - abs(p[i] - mid_p)
+            dq = 0.5 * extent_q - step - abs(q[i] - mid_q)
+            if dp >= 0 and dp < corner and dq >= 0 and dq < corner:
+                in_corners += footprint[i]
+        corners[k] = min(in_corners / (4.0 * (corner * corner)), 1.0)
+        # Lengths on the top's own plane (it may lean): stretch by the slope along each axis.
+        stretched_p = extent_p * math.hypot(1.0, alpha * cos + beta * sin)
+        stretched_q = extent_q * math.hypot(1.0, beta * cos - alpha * sin)
+        # How the top curves off its plane along each axis: the residuals' quadratic part over
+        # the middle half of the top, as the sag from its middle to that half's edges.
+        for direction in range(2):
+            coordinate = p if direction == 0 else q
+            mid = mid_p if direction == 0 else mid_q
+            extent = stretched_p if direction == 0 else stretched_q
+            count = inner_square = inner_residual = 0.0
+            for i in range(lo, hi):
+                offset = coordinate[i] - mid
+                if abs(offset) < extent / 4:
+                    count += 1.0
+                    inner_square += offset * offset
+                    inner_residual += residual[i]
+            count = max(count, 1.0)
+            inner_square /= count
+            inner_residual /= count
+            spread = curved = 0.0
+            for i in range(lo, hi):
+                offset = coordinate[i] - mid
+                if abs(offset) < extent / 4:
+                    centred = offset * offset - inner_square
+                    curved += centred * (residual[i] - inner_residual)
+                    spread += centred * centred
+            curve = (curved / count) / max(spread / count, 1e-18)
+            this = abs(curve) * (extent / 4) ** 2
+            share = this / max(extent / 2, 1e-9)
             if share > sag_share[k]:
                 sag[k] = this
             sag_share[k] = max(sag_share[k], share)
-    middle = np.empty((n, 2))
-    axis_ab = np.empty((n, 2))
-    slope = np.empty((n, 2))
-    height = np.empty(n)
-    tilt = np.empty(n)
-    fill = np.empty(n)
-    for k in range(n):
-        middle[k, 0] = mid_p[k] * cos[k] - mid_q[k] * sin[k]
-        middle[k, 1] = mid_p[k] * sin[k] + mid_q[k] * cos[k]
-        if extent_p[k] >= extent_q[k]:
-            axis_ab[k, 0], axis_ab[k, 1] = cos[k], sin[k]
+        middle[k, 0] = mid_p * cos - mid_q * sin
+        middle[k, 1] = mid_p * sin + mid_q * cos
+        if extent_p >= extent_q:
+            axis_ab[k, 0], axis_ab[k, 1] = cos, sin
         else:
-            axis_ab[k, 0], axis_ab[k, 1] = -sin[k], cos[k]
-        slope[k, 0], slope[k, 1] = alpha[k], beta[k]
-        height[k] = (
-            means[k, 2]
-            + alpha[k] * (middle[k, 0] - means[k, 0])
-            + beta[k] * (middle[k, 1] - means[k, 1])
-        )
-        tilt[k] = math.degrees(math.atan(math.hypot(alpha[k], beta[k])))
-        fill[k] = area[k] / max(extent_p[k] * extent_q[k], 1e-12)
+            axis_ab[k, 0], axis_ab[k, 1] = -sin, cos
+        length[k] = max(stretched_p, stretched_q)
+        width[k] = min(stretched_p, stretched_q)
+        slope[k, 0], slope[k, 1] = alpha, beta
+        height[k] = mean_h + alpha * (middle[k, 0] - mean_a) + beta * (middle[k, 1] - mean_b)
+        tilt[k] = math.degrees(math.atan(math.hypot(alpha, beta)))
+        fill[k] = area[k] / max(extent_p * extent_q, 1e-12)
     return (
-        pixels.astype(np.float64),
-        means[:, 3].copy(),
-        means[:, 4].copy(),
+        pixels,
+        mean_z,
+        mean_sigma,
         height,
         middle,
         axis_ab,
-        np.maximum(stretched_p, stretched_q),
-        np.minimum(stretched_p, stretched_q),
+        length,
+        width,
         area,
         fill,
-        np.minimum(corners, 1.0),
+        corners,
         rms,
         sag,
         sag_share,
@@ -722,6 +660,7 @@ def top_points(
     basis: Float64Array,
 ) -> tuple[
     npt.NDArray[np.intp],
+    npt.NDArray[np.intp],
     IntArray,
     Float64Array,
     Float64Array,
@@ -732,17 +671,25 @@ def top_points(
     Float64Array,
     Float64Array,
 ]:
-    """Every top pixel (``labels`` > 0, in the picture's order): its flat index, its top
-    (label - 1), its point's plane coordinates a and b (``basis``: e1, e2, normal, rows), its
-    height, depth and noise, whether it is on its top's outline (a pixel of another label or
-    none among its 8 neighbours in the picture) and its ray's x/z and y/z (``across`` per
-    column, ``down`` per row)."""
+    """Every top pixel (``labels`` > 0), top by top and in the picture's order within each:
+    where each top's pixels start (n + 1: the last is the count), and per pixel its flat
+    index, its top (label - 1), its point's plane coordinates a and b (``basis``: e1, e2,
+    normal, rows), its height, depth and noise, whether it is on its top's outline (a pixel of
+    another label or none among its 8 neighbours in the picture) and its ray's x/z and y/z
+    (``across`` per column, ``down`` per row)."""
     rows, cols = labels.shape
-    count = 0
+    n = 0
+    for r in range(rows):
+        for c in range(cols):
+            n = max(n, labels[r, c])
+    start = np.zeros(n + 1, dtype=np.intp)
     for r in range(rows):
         for c in range(cols):
             if labels[r, c] > 0:
-                count += 1
+                start[labels[r, c]] += 1
+    for k in range(n):
+        start[k + 1] += start[k]
+    count = start[n]
     index = np.empty(count, dtype=np.intp)
     top = np.empty(count, dtype=np.int32)
     a = np.empty(count)
@@ -753,12 +700,14 @@ def top_points(
     edge = np.zeros(count, dtype=np.bool_)
     ray_x = np.empty(count)
     ray_y = np.empty(count)
-    i = 0
+    at = start[:n].copy()
     for r in range(rows):
         for c in range(cols):
             label = labels[r, c]
             if label <= 0:
                 continue
+            i = at[label - 1]
+            at[label - 1] += 1
             index[i] = r * cols + c
             top[i] = label - 1
             zi = np.float64(depth[r, c])
@@ -775,8 +724,7 @@ def top_points(
                         edge[i] = True
             ray_x[i] = across[c]
             ray_y[i] = down[r]
-            i += 1
-    return index, top, a, b, h, z, noise, edge, ray_x, ray_y
+    return start, index, top, a, b, h, z, noise, edge, ray_x, ray_y
 
 
 @numba.njit(cache=True, nogil=True)
@@ -846,13 +794,13 @@ def warm_up() -> None:
     label = np.zeros(2, dtype=np.int32)
     a = np.array([0.0, 1.0])
     one = np.ones(2, dtype=np.bool_)
-    extents_at_angles(label, a, a, one, np.array([[0.0, 0.5]]))
+    rectangle_angles(np.array([0, 2]), a, a, np.array([0.0, 0.5]), np.array([0.0, 0.1]))
     extents(label, a, a, 1)
     grid = np.zeros((2, 2), dtype=np.int32)
     grid[0, 0] = 1
     flat = np.zeros((2, 2), dtype=np.float32)
     grow(grid, flat, np.ones((2, 2), dtype=np.bool_), flat + 1.0, 1)
-    measure_tops(label, a, a, a, a + 1.0, a, one, a, a, np.eye(3), 1.0, 1, a, a, 0.25)
+    measure_tops(np.array([0, 2]), a, a, a, a + 1.0, a, one, a, a, np.eye(3), 1.0, a, a, 0.25)
     picture = np.ones((3, 3), dtype=np.float32)
     lens, plane, limits = (np.ones(k, dtype=np.float32) for k in (4, 6, 5))
     surface_heights(picture, picture, picture, picture, plane, limits)

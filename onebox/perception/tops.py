@@ -293,11 +293,11 @@ def _measure(
     """Step 5 of the module docstring for every top (:func:`kernels.top_points`, then
     :func:`kernels.measure_tops`)."""
     rows, cols = labels.shape
-    n = int(labels.max())
     across, down = _rays(lens, cols, rows)
-    index, top, a, b, h, z, sigma_px, edge, ray_x, ray_y = kernels.top_points(
+    start, index, top, a, b, h, z, sigma_px, edge, ray_x, ray_y = kernels.top_points(
         labels, depth_m, surface.height_m, surface.sigma_m, across, down, basis
     )
+    n = len(start) - 1
     pts = Points(index, top, a, b, h, z)
     (
         pixels,
@@ -317,7 +317,7 @@ def _measure(
         tilt,
         slope,
     ) = kernels.measure_tops(
-        top,
+        start,
         a,
         b,
         h,
@@ -328,7 +328,6 @@ def _measure(
         ray_y,
         basis,
         lens.fx * lens.fy,
-        n,
         ANGLES,
         FINE_ANGLES,
         PROFILE_SHARE,
