@@ -45,7 +45,7 @@ import numpy as np
 import numpy.typing as npt
 
 from onebox.geometry import Intrinsics
-from onebox.perception import register
+from onebox.perception import kernels, register
 from onebox.perception.catalogue import Entry, match
 from onebox.perception.support import (
     Support,
@@ -205,10 +205,7 @@ def read_stride(shape: tuple[int, ...], max_pixels: int | None) -> int:
 
 def clean_depth(depth_m: npt.NDArray[np.floating]) -> Float32Array:
     """Float32 metres with every kind of no reading (0, negative, inf) as NaN."""
-    depth = np.array(depth_m, dtype=np.float32, copy=True)
-    with np.errstate(invalid="ignore"):
-        depth[~(depth > 0) | ~np.isfinite(depth)] = np.nan
-    return depth
+    return kernels.clean_depth(np.ascontiguousarray(depth_m, dtype=np.float32))
 
 
 def find_boxes(
@@ -328,17 +325,16 @@ def _standing_crop(
     its lens and where its first pixel lies in the picture: the rest is support or nothing,
     and finding tops there would only cost time."""
     rows, cols = depth_m.shape
-    with np.errstate(invalid="ignore"):
-        standing = (
-            depth_m * height_slope(lens, cols, rows, support.normal_camera)
-            + np.float32(support.offset_camera_m)
-        ) > np.float32(min_height_m)
-    any_row = np.flatnonzero(standing.any(axis=1))
-    any_col = np.flatnonzero(standing.any(axis=0))
-    if any_row.size == 0:
+    first_row, last_row, first_col, last_col = kernels.standing_bounds(
+        depth_m,
+        height_slope(lens, cols, rows, support.normal_camera),
+        support.offset_camera_m,
+        min_height_m,
+    )
+    if first_row < 0:
         return depth_m[:0, :0], None, lens, (0, 0)
-    r0, r1 = max(any_row[0] - CROP_MARGIN_PX, 0), min(any_row[-1] + CROP_MARGIN_PX + 1, rows)
-    c0, c1 = max(any_col[0] - CROP_MARGIN_PX, 0), min(any_col[-1] + CROP_MARGIN_PX + 1, cols)
+    r0, r1 = max(first_row - CROP_MARGIN_PX, 0), min(last_row + CROP_MARGIN_PX + 1, rows)
+    c0, c1 = max(first_col - CROP_MARGIN_PX, 0), min(last_col + CROP_MARGIN_PX + 1, cols)
     if (r0, r1, c0, c1) == (0, rows, 0, cols):
         return depth_m, colour, lens, (0, 0)
     crop = np.ascontiguousarray(depth_m[r0:r1, c0:c1])

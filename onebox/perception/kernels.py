@@ -789,6 +789,62 @@ def drop_small(labels: IntArray, min_pixels: int) -> IntArray:
     return result
 
 
+@numba.njit(cache=True, nogil=True)
+def seam_pixels(
+    dark: npt.NDArray[np.uint8],
+    gx: Float32Array,
+    gy: Float32Array,
+    dark_step: float,
+    edge_step: float,
+) -> npt.NDArray[np.uint8]:
+    """1 where a pixel is on a thin dark line (``dark``, the black-hat, above ``dark_step``)
+    or on a strong colour edge (the Sobel gradient's squared length above ``edge_step``
+    squared, in float32 as NumPy compares it), else 0."""
+    rows, cols = dark.shape
+    edge = np.float32(edge_step * edge_step)
+    result = np.zeros((rows, cols), dtype=np.uint8)
+    for r in range(rows):
+        for c in range(cols):
+            if dark[r, c] > dark_step or gx[r, c] * gx[r, c] + gy[r, c] * gy[r, c] > edge:
+                result[r, c] = 1
+    return result
+
+
+@numba.njit(cache=True, nogil=True)
+def clean_depth(depth: Float32Array) -> Float32Array:
+    """A copy of ``depth`` with every kind of no reading (0, negative, inf, NaN) as NaN."""
+    rows, cols = depth.shape
+    result = np.empty((rows, cols), dtype=np.float32)
+    for r in range(rows):
+        for c in range(cols):
+            d = depth[r, c]
+            result[r, c] = d if (d > 0 and d < np.inf) else np.nan
+    return result
+
+
+@numba.njit(cache=True, nogil=True)
+def standing_bounds(
+    depth: Float32Array, slope: Float32Array, offset: float, min_height: float
+) -> tuple[int, int, int, int]:
+    """The first and last row and column holding a pixel higher than ``min_height`` (height
+    ``depth * slope + offset``, float32 as NumPy computes it); (-1, -1, -1, -1) if none."""
+    rows, cols = depth.shape
+    offset32 = np.float32(offset)
+    least = np.float32(min_height)
+    first_row, last_row, first_col, last_col = -1, -1, cols, -1
+    for r in range(rows):
+        for c in range(cols):
+            if depth[r, c] * slope[r, c] + offset32 > least:
+                if first_row < 0:
+                    first_row = r
+                last_row = r
+                first_col = min(first_col, c)
+                last_col = max(last_col, c)
+    if first_row < 0:
+        return -1, -1, -1, -1
+    return first_row, last_row, first_col, last_col
+
+
 def warm_up() -> None:
     """Compile (or load from the cache) every kernel on a tiny input."""
     label = np.zeros(2, dtype=np.int32)
@@ -809,6 +865,9 @@ def warm_up() -> None:
     top_points(grid, flat, flat, flat, flat[0], flat[0], np.eye(3))
     standing(flat, flat, one.reshape(1, 2), one.reshape(1, 2), 0.01, np.inf)
     drop_small(grid, 2)
+    clean_depth(flat)
+    standing_bounds(flat, flat, 1.0, 0.01)
+    seam_pixels(np.zeros((2, 2), dtype=np.uint8), flat, flat, 1.0, 1.0)
     one_top = np.ones((1, 2))
     seam_cuts(
         np.arange(2),

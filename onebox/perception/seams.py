@@ -68,19 +68,27 @@ def seam_map(
     distance = float(np.median(finite)) if finite.size else 1.0
     size = int(np.clip(round(SEAM_WIDTH_M * lens.fx / max(distance, 0.1)), 3, 9)) | 1
     kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (size, size))
-    dark = cv2.morphologyEx(grey, cv2.MORPH_BLACKHAT, kernel)
+    dark = np.asarray(cv2.morphologyEx(grey, cv2.MORPH_BLACKHAT, kernel), dtype=np.uint8)
     # The picture's own noise: the median absolute Laplacian (mostly flat regions).
     laplacian = cv2.Laplacian(grey, cv2.CV_16S)
-    noise = float(np.median(np.abs(laplacian[::2, ::2]))) / 4.0
-    gx = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3)
-    gy = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3)
+    noise = _median_of_counts(np.abs(laplacian[::2, ::2])) / 4.0
+    gx = np.asarray(cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3), dtype=np.float32)
+    gy = np.asarray(cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3), dtype=np.float32)
     # A Sobel response is 4 x the step between neighbours.
-    edge = (gx * gx + gy * gy) > (4.0 * max(EDGE_STEP, 6.0 * noise)) ** 2
-    seam = (dark > max(DARK_STEP, 4.0 * noise)) | edge
-    result: BoolArray = np.asarray(
-        cv2.dilate(seam.astype(np.uint8), np.ones((3, 3), np.uint8)), dtype=bool
+    seam = kernels.seam_pixels(
+        dark, gx, gy, max(DARK_STEP, 4.0 * noise), 4.0 * max(EDGE_STEP, 6.0 * noise)
     )
+    result: BoolArray = np.asarray(cv2.dilate(seam, np.ones((3, 3), np.uint8)), dtype=bool)
     return result, np.asarray(grey, dtype=np.uint8)
+
+
+def _median_of_counts(values: npt.NDArray[np.int16]) -> float:
+    """``np.median`` of small non-negative whole numbers, from their histogram (no sort)."""
+    counts = np.cumsum(np.bincount(values.ravel()))
+    total = int(counts[-1])
+    below = int(np.searchsorted(counts, (total - 1) // 2, side="right"))
+    above = int(np.searchsorted(counts, total // 2, side="right"))
+    return 0.5 * (below + above)
 
 
 def split_at_seams(tops: Tops, seam: BoolArray, grey: npt.NDArray[np.uint8]) -> IntArray | None:
