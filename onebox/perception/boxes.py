@@ -377,24 +377,21 @@ def _look_round(
     """Probe points just past each side of every top, on the top's plane extended: what the
     camera sees along the ray to each (see :class:`Round`), in the whole picture (``tops``
     were found in the part of it whose first pixel is ``origin``)."""
-    axis = tops.axis_ab
-    perp = np.stack([-axis[:, 1], axis[:, 0]], axis=1)
-    half = np.stack([tops.length_m, tops.width_m], axis=1) * 0.5
     pixel = tops.depth_m / lens.fx
     reach = np.maximum(PROBE_REACH_M, 2.5 * pixel)
     # Sides: +length, -length, +width, -width; probes spread along each side's middle 80 %.
-    spread = np.linspace(-0.8, 0.8, PROBES_PER_SIDE)
-    outward = np.stack([axis, -axis, perp, -perp], axis=1)  # (n, 4, 2)
-    along = np.stack([perp, perp, axis, axis], axis=1)
-    out_len = np.stack([half[:, 0], half[:, 0], half[:, 1], half[:, 1]], axis=1) + reach[:, None]
-    along_len = np.stack([half[:, 1], half[:, 1], half[:, 0], half[:, 0]], axis=1)
-    ab = (
-        tops.middle_ab[:, None, None, :]
-        + outward[:, :, None, :] * out_len[:, :, None, None]
-        + along[:, :, None, :] * (along_len[:, :, None, None] * spread[None, None, :, None])
-    )  # (n, 4, P, 2)
-    z_expected, seen, inside, (vi, ui) = sight(
-        ab, tops.height_m[:, None, None], tops.basis, depth_m, lens, support
+    ab, z_expected, seen, inside, vi, ui = kernels.probe_round(
+        tops.middle_ab,
+        tops.axis_ab,
+        tops.length_m,
+        tops.width_m,
+        reach,
+        np.linspace(-0.8, 0.8, PROBES_PER_SIDE),
+        tops.height_m,
+        tops.basis,
+        support.offset_camera_m,
+        depth_m,
+        _lens_array(lens),
     )
     tolerance = np.maximum(3.0 * tops.sigma_m, 0.006)[:, None, None]
     with np.errstate(invalid="ignore"):
@@ -419,6 +416,11 @@ def _look_round(
     return Round(hidden, lower, cut_off, sloping, seen_top, ab, covered, corners_covered)
 
 
+def _lens_array(lens: Intrinsics) -> Float64Array:
+    """fx, fy, cx, cy, as the kernels take them."""
+    return np.array([lens.fx, lens.fy, lens.cx, lens.cy])
+
+
 def _covered(
     tops: Tops, depth_m: Float32Array, lens: Intrinsics, support: Support
 ) -> tuple[Float64Array, Float64Array]:
@@ -427,14 +429,19 @@ def _covered(
     grid = np.linspace(-0.45, 0.45, COVER_GRID)
     s_grid, t_grid = np.meshgrid(grid, grid, indexing="ij")
     s, t = s_grid.ravel(), t_grid.ravel()
-    axis = tops.axis_ab
-    perp = np.stack([-axis[:, 1], axis[:, 0]], axis=1)
-    ab = (
-        tops.middle_ab[:, None, :]
-        + (s[None, :, None] * tops.length_m[:, None, None]) * axis[:, None, :]
-        + (t[None, :, None] * tops.width_m[:, None, None]) * perp[:, None, :]
+    z_expected, seen = kernels.probe_cover(
+        tops.middle_ab,
+        tops.axis_ab,
+        tops.length_m,
+        tops.width_m,
+        s,
+        t,
+        tops.height_m,
+        tops.basis,
+        support.offset_camera_m,
+        depth_m,
+        _lens_array(lens),
     )
-    z_expected, seen, _, _ = sight(ab, tops.height_m[:, None], tops.basis, depth_m, lens, support)
     tolerance = np.maximum(3.0 * tops.sigma_m, 0.006)[:, None]
     with np.errstate(invalid="ignore"):
         nearer = seen < z_expected - 4.0 * tolerance
@@ -481,23 +488,20 @@ def _on_sides(
     middle 60 % of each side) at the heights ``height_m`` (n, H): the depth each would read
     if seen, the depth seen there, whether it is in the picture, and its pixel (row, column);
     each (n, 4, H, 5)."""
-    n, levels = height_m.shape
-    axis = tops.axis_ab
-    perp = np.stack([-axis[:, 1], axis[:, 0]], axis=1)
-    outward = np.stack([axis, -axis, perp, -perp], axis=1)  # (n, 4, 2)
-    along = np.stack([perp, perp, axis, axis], axis=1)
-    half = np.stack([tops.length_m, tops.length_m, tops.width_m, tops.width_m], axis=1) / 2
-    half_along = np.stack([tops.width_m, tops.width_m, tops.length_m, tops.length_m], axis=1) / 2
-    spread = np.linspace(-0.6, 0.6, 5)
-    inset = (tops.depth_m / lens.fx)[:, None]
-    ab = (
-        tops.middle_ab[:, None, None, None, :]
-        + (outward * (half - inset)[..., None])[:, :, None, None, :]
-        + (along * half_along[..., None])[:, :, None, None, :] * spread[None, None, None, :, None]
+    z_expected, seen, inside, vi, ui = kernels.probe_faces(
+        tops.middle_ab,
+        tops.axis_ab,
+        tops.length_m,
+        tops.width_m,
+        tops.depth_m / lens.fx,
+        np.linspace(-0.6, 0.6, 5),
+        np.ascontiguousarray(height_m, dtype=np.float64),
+        tops.basis,
+        support.offset_camera_m,
+        depth_m,
+        _lens_array(lens),
     )
-    ab = np.broadcast_to(ab, (n, 4, levels, len(spread), 2))
-    heights = np.broadcast_to(height_m[:, None, :, None], (n, 4, levels, len(spread)))
-    return sight(ab, heights, tops.basis, depth_m, lens, support)
+    return z_expected, seen, inside, (vi, ui)
 
 
 def _looked_at(tops: Tops, round_: Round, lens: Intrinsics, support: Support) -> BoolArray:

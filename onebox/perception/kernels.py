@@ -608,6 +608,29 @@ def surface_facing(
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
+def _sight_one(
+    a: float,
+    b: float,
+    height: float,
+    basis: Float64Array,
+    offset: float,
+    depth: Float32Array,
+    lens: Float64Array,
+) -> tuple[float, float, bool, int, int]:
+    """:func:`sight` for one point."""
+    rows, cols = depth.shape
+    lift = height - offset
+    x = a * basis[0, 0] + b * basis[1, 0] + lift * basis[2, 0]
+    y = a * basis[0, 1] + b * basis[1, 1] + lift * basis[2, 1]
+    z = a * basis[0, 2] + b * basis[1, 2] + lift * basis[2, 2]
+    u = np.rint(lens[0] * x / z + lens[2])
+    v = np.rint(lens[1] * y / z + lens[3])
+    if u >= 0 and u < cols and v >= 0 and v < rows and z > 0:
+        return z, np.float64(depth[int(v), int(u)]), True, int(v), int(u)
+    return z, np.nan, False, 0, 0
+
+
+@numba.njit(cache=True, nogil=True)
 def sight(
     a: Float64Array,
     b: Float64Array,
@@ -624,8 +647,6 @@ def sight(
     would read if seen, the depth seen at its pixel (NaN outside the picture or no reading),
     whether it is in the picture, and its pixel's row and column (0 outside). ``lens`` is fx,
     fy, cx, cy."""
-    rows, cols = depth.shape
-    fx, fy, cx, cy = lens[0], lens[1], lens[2], lens[3]
     count = len(a)
     z = np.empty(count)
     seen = np.empty(count)
@@ -633,19 +654,152 @@ def sight(
     vi = np.zeros(count, dtype=np.intp)
     ui = np.zeros(count, dtype=np.intp)
     for i in range(count):
-        lift = height[i] - offset
-        x = a[i] * basis[0, 0] + b[i] * basis[1, 0] + lift * basis[2, 0]
-        y = a[i] * basis[0, 1] + b[i] * basis[1, 1] + lift * basis[2, 1]
-        z[i] = a[i] * basis[0, 2] + b[i] * basis[1, 2] + lift * basis[2, 2]
-        u = np.rint(fx * x / z[i] + cx)
-        v = np.rint(fy * y / z[i] + cy)
-        inside[i] = u >= 0 and u < cols and v >= 0 and v < rows and z[i] > 0
-        if inside[i]:
-            ui[i] = int(u)
-            vi[i] = int(v)
-            seen[i] = depth[vi[i], ui[i]]
-        else:
-            seen[i] = np.nan
+        z[i], seen[i], inside[i], vi[i], ui[i] = _sight_one(
+            a[i], b[i], height[i], basis, offset, depth, lens
+        )
+    return z, seen, inside, vi, ui
+
+
+@numba.njit(cache=True, nogil=True)
+def _sides(axis_ab: Float64Array, k: int) -> tuple[Float64Array, Float64Array]:
+    """Top k's four sides (+length, -length, +width, -width): each one's outward direction
+    and the direction along it, (4, 2) each, in the support plane's coordinates."""
+    ax, ay = axis_ab[k, 0], axis_ab[k, 1]
+    outward = np.array([[ax, ay], [-ax, -ay], [-ay, ax], [ay, -ax]])
+    along = np.array([[-ay, ax], [-ay, ax], [ax, ay], [ax, ay]])
+    return outward, along
+
+
+@numba.njit(cache=True, nogil=True)
+def probe_round(
+    middle_ab: Float64Array,
+    axis_ab: Float64Array,
+    length: Float64Array,
+    width: Float64Array,
+    reach: Float64Array,
+    spread: Float64Array,
+    height: Float64Array,
+    basis: Float64Array,
+    offset: float,
+    depth: Float32Array,
+    lens: Float64Array,
+) -> tuple[
+    Float64Array,
+    Float64Array,
+    Float64Array,
+    npt.NDArray[np.bool_],
+    npt.NDArray[np.intp],
+    npt.NDArray[np.intp],
+]:
+    """The probes just past each top's sides (:func:`onebox.perception.boxes._look_round`):
+    ``reach`` past the side, at ``spread`` (shares of the half side) along it, at the top's
+    height, seen as :func:`sight` sees them. Returns the probes' plane coordinates (n, 4, P, 2)
+    and their z expected, depth seen, whether inside, row and column (n, 4, P)."""
+    n, probes = len(length), len(spread)
+    ab = np.empty((n, 4, probes, 2))
+    z = np.empty((n, 4, probes))
+    seen = np.empty((n, 4, probes))
+    inside = np.empty((n, 4, probes), dtype=np.bool_)
+    vi = np.empty((n, 4, probes), dtype=np.intp)
+    ui = np.empty((n, 4, probes), dtype=np.intp)
+    for k in range(n):
+        outward, along = _sides(axis_ab, k)
+        half_l, half_w = length[k] * 0.5, width[k] * 0.5
+        for side in range(4):
+            out_len = (half_l if side < 2 else half_w) + reach[k]
+            along_len = half_w if side < 2 else half_l
+            for j in range(probes):
+                for c in range(2):
+                    ab[k, side, j, c] = (middle_ab[k, c] + outward[side, c] * out_len) + along[
+                        side, c
+                    ] * (along_len * spread[j])
+                (
+                    z[k, side, j],
+                    seen[k, side, j],
+                    inside[k, side, j],
+                    vi[k, side, j],
+                    ui[k, side, j],
+                ) = _sight_one(
+                    ab[k, side, j, 0], ab[k, side, j, 1], height[k], basis, offset, depth, lens
+                )
+    return ab, z, seen, inside, vi, ui
+
+
+@numba.njit(cache=True, nogil=True)
+def probe_cover(
+    middle_ab: Float64Array,
+    axis_ab: Float64Array,
+    length: Float64Array,
+    width: Float64Array,
+    s: Float64Array,
+    t: Float64Array,
+    height: Float64Array,
+    basis: Float64Array,
+    offset: float,
+    depth: Float32Array,
+    lens: Float64Array,
+) -> tuple[Float64Array, Float64Array]:
+    """Points on each top's rectangle (:func:`onebox.perception.boxes._covered`): ``s`` of
+    its length along its axis and ``t`` of its width across, at its height, seen as
+    :func:`sight` sees them: z expected and depth seen, (n, len(s)) each."""
+    n, count = len(length), len(s)
+    z = np.empty((n, count))
+    seen = np.empty((n, count))
+    for k in range(n):
+        ax, ay = axis_ab[k, 0], axis_ab[k, 1]
+        for i in range(count):
+            a = (middle_ab[k, 0] + (s[i] * length[k]) * ax) + (t[i] * width[k]) * -ay
+            b = (middle_ab[k, 1] + (s[i] * length[k]) * ay) + (t[i] * width[k]) * ax
+            z[k, i], seen[k, i], _, _, _ = _sight_one(a, b, height[k], basis, offset, depth, lens)
+    return z, seen
+
+
+@numba.njit(cache=True, nogil=True)
+def probe_faces(
+    middle_ab: Float64Array,
+    axis_ab: Float64Array,
+    length: Float64Array,
+    width: Float64Array,
+    inset: Float64Array,
+    spread: Float64Array,
+    heights: Float64Array,
+    basis: Float64Array,
+    offset: float,
+    depth: Float32Array,
+    lens: Float64Array,
+) -> tuple[
+    Float64Array, Float64Array, npt.NDArray[np.bool_], npt.NDArray[np.intp], npt.NDArray[np.intp]
+]:
+    """Points on the planes of each top's four sides (:func:`onebox.perception.boxes.
+    _on_sides`): ``inset`` in from the rectangle, at ``spread`` (shares of the half side)
+    along it, at each of the top's ``heights`` (n, H), seen as :func:`sight` sees them: z
+    expected, depth seen, whether inside, row and column, (n, 4, H, len(spread)) each."""
+    n, levels, count = len(length), heights.shape[1], len(spread)
+    z = np.empty((n, 4, levels, count))
+    seen = np.empty((n, 4, levels, count))
+    inside = np.empty((n, 4, levels, count), dtype=np.bool_)
+    vi = np.empty((n, 4, levels, count), dtype=np.intp)
+    ui = np.empty((n, 4, levels, count), dtype=np.intp)
+    for k in range(n):
+        outward, along = _sides(axis_ab, k)
+        for side in range(4):
+            half = (length[k] if side < 2 else width[k]) / 2
+            half_along = (width[k] if side < 2 else length[k]) / 2
+            for j in range(count):
+                a = (middle_ab[k, 0] + outward[side, 0] * (half - inset[k])) + (
+                    along[side, 0] * half_along
+                ) * spread[j]
+                b = (middle_ab[k, 1] + outward[side, 1] * (half - inset[k])) + (
+                    along[side, 1] * half_along
+                ) * spread[j]
+                for level in range(levels):
+                    (
+                        z[k, side, level, j],
+                        seen[k, side, level, j],
+                        inside[k, side, level, j],
+                        vi[k, side, level, j],
+                        ui[k, side, level, j],
+                    ) = _sight_one(a, b, heights[k, level], basis, offset, depth, lens)
     return z, seen, inside, vi, ui
 
 
@@ -862,6 +1016,14 @@ def warm_up() -> None:
     surface_heights(picture, picture, picture, picture, plane, limits)
     surface_facing(picture, picture, picture, picture, picture, 1, lens, plane, limits)
     sight(a, a, a, np.eye(3), 1.0, picture, np.ones(4))
+    tops_ab = np.ones((1, 2))
+    probe_round(
+        tops_ab, tops_ab, a[:1], a[:1], a[:1], a, a[:1], np.eye(3), 1.0, picture, np.ones(4)
+    )
+    probe_cover(tops_ab, tops_ab, a[:1], a[:1], a, a, a[:1], np.eye(3), 1.0, picture, np.ones(4))
+    probe_faces(
+        tops_ab, tops_ab, a[:1], a[:1], a[:1], a, tops_ab, np.eye(3), 1.0, picture, np.ones(4)
+    )
     top_points(grid, flat, flat, flat, flat[0], flat[0], np.eye(3))
     standing(flat, flat, one.reshape(1, 2), one.reshape(1, 2), 0.01, np.inf)
     drop_small(grid, 2)
