@@ -42,6 +42,35 @@ def extents(label: IntArray, p: Float64Array, q: Float64Array, count: int) -> Fl
 
 
 @numba.njit(cache=True, nogil=True)
+def _extremes_3x3(values: IntArray) -> tuple[IntArray, IntArray]:
+    """The largest and smallest value in each pixel's 3 x 3 neighbourhood (within the
+    picture): a pass along the rows, then one down the columns."""
+    rows, cols = values.shape
+    row_high = values.copy()
+    row_low = values.copy()
+    for r in range(rows):
+        for c in range(cols - 1):
+            right = values[r, c + 1]
+            row_high[r, c] = max(row_high[r, c], right)
+            row_low[r, c] = min(row_low[r, c], right)
+        for c in range(1, cols):
+            left = values[r, c - 1]
+            row_high[r, c] = max(row_high[r, c], left)
+            row_low[r, c] = min(row_low[r, c], left)
+    high = row_high.copy()
+    low = row_low.copy()
+    for r in range(rows - 1):
+        for c in range(cols):
+            high[r, c] = max(high[r, c], row_high[r + 1, c])
+            low[r, c] = min(low[r, c], row_low[r + 1, c])
+    for r in range(1, rows):
+        for c in range(cols):
+            high[r, c] = max(high[r, c], row_high[r - 1, c])
+            low[r, c] = min(low[r, c], row_low[r - 1, c])
+    return high, low
+
+
+@numba.njit(cache=True, nogil=True)
 def grow(
     labels: npt.NDArray[np.int32],
     height: npt.NDArray[np.float32],
@@ -854,6 +883,8 @@ def top_points(
     edge = np.zeros(count, dtype=np.bool_)
     ray_x = np.empty(count)
     ray_y = np.empty(count)
+    # On the outline: another label (or none) among the 8 neighbours.
+    high, low = _extremes_3x3(labels)
     at = start[:n].copy()
     for r in range(rows):
         for c in range(cols):
@@ -872,10 +903,7 @@ def top_points(
             h[i] = height[r, c]
             z[i] = zi
             noise[i] = sigma[r, c]
-            for rr in range(max(r - 1, 0), min(r + 2, rows)):
-                for cc in range(max(c - 1, 0), min(c + 2, cols)):
-                    if labels[rr, cc] != label:
-                        edge[i] = True
+            edge[i] = high[r, c] != label or low[r, c] != label
             ray_x[i] = across[c]
             ray_y[i] = down[r]
     return start, index, top, a, b, h, z, noise, edge, ray_x, ray_y

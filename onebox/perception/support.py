@@ -88,6 +88,15 @@ class Support:
         return result
 
 
+def _median(values: Float64Array) -> float:
+    """``np.median`` of values with no NaN among them, without its generality's overhead."""
+    half = values.size // 2
+    if values.size % 2:
+        return float(np.partition(values, half)[half])
+    part = np.partition(values, (half - 1, half))
+    return float((part[half - 1] + part[half]) / 2)
+
+
 def _sample(depth_m: Float32Array, lens: Intrinsics) -> tuple[Float64Array, IntArray]:
     """Optical-frame points of a grid sample of readings, and their flat pixel indices."""
     height, width = depth_m.shape
@@ -164,7 +173,11 @@ def _ransac(
 def _least_squares(points: Float64Array) -> tuple[Float64Array, float, float]:
     """The plane through points by least squares: normal toward the origin, offset, rms."""
     centre = points.mean(axis=0)
-    moments = np.cov((points - centre).T)
+    # np.cov's own steps (its argument handling costs more than the sums on a few points).
+    centred = np.array((points - centre).T, dtype=np.float64)
+    centred -= centred.mean(axis=1)[:, None]
+    moments = np.dot(centred, centred.T)
+    moments *= 1.0 / (len(points) - 1)
     values, vectors = np.linalg.eigh(moments)
     normal = vectors[:, 0]
     offset = -float(normal @ centre)
@@ -183,12 +196,12 @@ def _refine(
     at 3 sigma(z), least squares."""
     normal, offset, _ = _least_squares(points[inliers])
     d = points[:, 2]
-    distance = float(np.median(d[inliers]))
+    distance = _median(d[inliers])
     for _ in range(2):
         residual = points @ normal + offset
         if sigma_m is None:
             scaled = residual[inliers] / (d[inliers] / distance) ** 2
-            sigma = 1.4826 * float(np.median(np.abs(scaled - np.median(scaled))))
+            sigma = 1.4826 * _median(np.abs(scaled - _median(scaled)))
             sigma = max(sigma, SIGMA_FLOOR_M, 0.5 * quantum_m2 * distance * distance)
         else:
             sigma = sigma_m
@@ -262,11 +275,11 @@ def fit_support(
             near = np.abs(residual) < _initial_threshold(points[:, 2], noise_sigma_m)
             share = float(near.mean())
             if near.sum() >= 3 and noise_sigma_m is None:
-                distance = float(np.median(points[near, 2]))
-                mad = float(np.median(np.abs(residual[near] - np.median(residual[near]))))
+                distance = _median(points[near, 2])
+                mad = _median(np.abs(residual[near] - _median(residual[near])))
                 sigma = max(1.4826 * mad, SIGMA_FLOOR_M)
             else:
-                distance, sigma = float(np.median(points[:, 2])), noise_sigma_m or SIGMA_FLOOR_M
+                distance, sigma = _median(points[:, 2]), noise_sigma_m or SIGMA_FLOOR_M
         else:
             share, distance, sigma = 0.0, 1.0, noise_sigma_m or SIGMA_FLOOR_M
         support = support_from_plane(normal_c, offset_c, camera_to_world, share, sigma, distance)
@@ -275,7 +288,7 @@ def fit_support(
         return None
     # Stray readings far beyond the scene (a stereo camera's mismatches at tens of metres)
     # would be within any plane's band there, the band growing as z^2: leave them out.
-    points = points[points[:, 2] < FAR_SHARE * np.median(points[:, 2])]
+    points = points[points[:, 2] < FAR_SHARE * _median(points[:, 2])]
     if len(points) < 30:
         return None
     rng = np.random.default_rng(seed)
@@ -328,7 +341,7 @@ def noise_against(depth_m: Float32Array, lens: Intrinsics, support: Support) -> 
     if near.sum() < 30:
         return support.sigma_m
     scaled = residual[near] / (d[near] / support.distance_m) ** 2
-    return max(1.4826 * float(np.median(np.abs(scaled - np.median(scaled)))), SIGMA_FLOOR_M)
+    return max(1.4826 * _median(np.abs(scaled - _median(scaled))), SIGMA_FLOOR_M)
 
 
 def lump_width(depth_m: Float32Array, lens: Intrinsics, support: Support) -> float:
@@ -368,8 +381,8 @@ def lump_width(depth_m: Float32Array, lens: Intrinsics, support: Support) -> flo
     res_all, diff = np.concatenate(own), np.concatenate(apart)
     if len(diff) < 30:
         return 0.0
-    spread = float(np.median(np.abs(res_all - np.median(res_all))))
-    step = float(np.median(np.abs(diff - np.median(diff))))
+    spread = _median(np.abs(res_all - _median(res_all)))
+    step = _median(np.abs(diff - _median(diff)))
     if spread <= 0.0:
         return 0.0
     rho = 1.0 - 0.5 * (step / spread) ** 2
