@@ -54,7 +54,7 @@ from onebox.perception.support import (
     noise_against,
 )
 from onebox.perception.surface import height_slope, read_surface
-from onebox.perception.tops import Tops, find_tops, sight
+from onebox.perception.tops import Tops, cross, find_tops, sight
 
 Float32Array = npt.NDArray[np.float32]
 Float64Array = npt.NDArray[np.float64]
@@ -702,7 +702,7 @@ def _report(
         length_c = tops.axis_ab[k, 0] * e1 + tops.axis_ab[k, 1] * e2
         x_axis = rotation @ length_c
         z_axis = rotation @ n_c
-        y_axis = np.cross(z_axis, x_axis)
+        y_axis = cross(z_axis, x_axis)
         top = rotation @ top_c + shift
         centre = rotation @ centre_c + shift
         if settings.workspace is not None and not all(

@@ -1009,19 +1009,30 @@ def standing_bounds(
     depth: Float32Array, slope: Float32Array, offset: float, min_height: float
 ) -> tuple[int, int, int, int]:
     """The first and last row and column holding a pixel higher than ``min_height`` (height
-    ``depth * slope + offset``, float32 as NumPy computes it); (-1, -1, -1, -1) if none."""
+    ``depth * slope + offset``, float32 as NumPy computes it); (-1, -1, -1, -1) if none.
+    Each row is counted whole (a loop the compiler vectorises), then only the rows that hold
+    any are searched from either end."""
     rows, cols = depth.shape
     offset32 = np.float32(offset)
     least = np.float32(min_height)
     first_row, last_row, first_col, last_col = -1, -1, cols, -1
     for r in range(rows):
+        count = 0
+        for c in range(cols):
+            count += depth[r, c] * slope[r, c] + offset32 > least
+        if count == 0:
+            continue
+        if first_row < 0:
+            first_row = r
+        last_row = r
         for c in range(cols):
             if depth[r, c] * slope[r, c] + offset32 > least:
-                if first_row < 0:
-                    first_row = r
-                last_row = r
                 first_col = min(first_col, c)
+                break
+        for c in range(cols - 1, -1, -1):
+            if depth[r, c] * slope[r, c] + offset32 > least:
                 last_col = max(last_col, c)
+                break
     if first_row < 0:
         return -1, -1, -1, -1
     return first_row, last_row, first_col, last_col

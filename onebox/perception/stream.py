@@ -27,6 +27,7 @@ from onebox.geometry import Intrinsics
 from onebox.perception import register
 from onebox.perception.boxes import Box, FinderSettings, Found, find_boxes, quaternion
 from onebox.perception.support import Support, fit_support, support_holds
+from onebox.perception.tops import cross
 
 Float64Array = npt.NDArray[np.float64]
 
@@ -161,13 +162,13 @@ def _held(old: Box, new: Box) -> Box:
     x_axis += SMOOTHING * new_axes[:, 0]
     x_axis -= (x_axis @ up) * up
     x_axis /= np.linalg.norm(x_axis)
-    rotation = np.stack([x_axis, np.cross(up, x_axis), up], axis=1)
+    rotation = np.stack([x_axis, cross(up, x_axis), up], axis=1)
     top = (1 - SMOOTHING) * np.asarray(old.top_middle) + SMOOTHING * np.asarray(new.top_middle)
     size = (1 - SMOOTHING) * np.asarray(old.size) + SMOOTHING * np.asarray(new.size)
     centre = top - 0.5 * size[2] * up
     q = quaternion(rotation)
     yaw = new.yaw_deg + math.degrees(
-        math.atan2(float(np.cross(new_axes[:, 0], x_axis) @ up), float(new_axes[:, 0] @ x_axis))
+        math.atan2(float(cross(new_axes[:, 0], x_axis) @ up), float(new_axes[:, 0] @ x_axis))
     )
     yaw = (yaw + 90.0) % 180.0 - 90.0
     return replace(
