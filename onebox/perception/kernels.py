@@ -548,27 +548,25 @@ def seam_cuts(
 def surface_heights(
     depth: Float32Array,
     slope: Float32Array,
-    weight: Float32Array,
-    total: Float32Array,
     plane: Float32Array,
     limits: Float32Array,
-) -> tuple[Float32Array, Float32Array, Float32Array, Float32Array, Float32Array]:
+) -> tuple[Float32Array, Float32Array, Float32Array, Float32Array, npt.NDArray[np.bool_]]:
     """Every pixel's height and noise (:func:`onebox.perception.surface.read_surface`), in
-    float32 as NumPy computes them; its box-filtered depth (``total`` over ``weight``, NaN
-    where fewer readings than the least weight); its height for the 3 x 3 highest and lowest
-    (-inf and inf where no reading, which is neither).
+    float32 as NumPy computes them; its height for the 3 x 3 highest and lowest (-inf and inf
+    where no reading, which is neither); and whether its noise is quiet (under a share of its
+    footprint, ``depth / fx``).
 
     ``plane`` is the support's normal (optical frame), offset, sigma and 1 / its distance;
     ``limits`` the noise floor, the cosine of the steepest top, the step in sigmas, the least
-    step and the least box-filter weight."""
+    step, the quiet share and fx."""
     rows, cols = depth.shape
     offset, sigma_support, inverse_distance = plane[3], plane[4], plane[5]
-    floor, min_weight = limits[0], limits[4]
+    floor, quiet_share, fx = limits[0], limits[4], limits[5]
     height = np.empty((rows, cols), dtype=np.float32)
     sigma = np.empty((rows, cols), dtype=np.float32)
-    smooth = np.empty((rows, cols), dtype=np.float32)
     for_high = np.empty((rows, cols), dtype=np.float32)
     for_low = np.empty((rows, cols), dtype=np.float32)
+    quiet = np.empty((rows, cols), dtype=np.bool_)
     for r in range(rows):
         for c in range(cols):
             d = depth[r, c]
@@ -578,44 +576,43 @@ def surface_heights(
             noise = sigma_support * ratio * ratio
             # np.maximum: NaN wins.
             sigma[r, c] = noise if (noise != noise or noise > floor) else floor
-            if weight[r, c] < min_weight:
-                smooth[r, c] = np.nan
-            else:
-                smooth[r, c] = total[r, c] / weight[r, c]
+            quiet[r, c] = sigma[r, c] < quiet_share * d / fx
             finite = np.isfinite(d)
             for_high[r, c] = h if finite else -np.inf
             for_low[r, c] = h if finite else np.inf
-    return height, sigma, smooth, for_high, for_low
+    return height, sigma, for_high, for_low, quiet
 
 
 @numba.njit(cache=True, nogil=True)
-def surface_facing(
+def faces_up(
     depth: Float32Array,
-    smooth: Float32Array,
-    sigma: Float32Array,
-    high: Float32Array,
-    low: Float32Array,
+    weight: Float32Array,
+    total: Float32Array,
     reach: int,
     lens: Float32Array,
     plane: Float32Array,
     limits: Float32Array,
-) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_]]:
-    """Whether each pixel faces up (the normal from the gradient of the box-filtered depth
-    ``smooth``, ``reach`` pixels either side) and whether the height steps across its 3 x 3
-    neighbourhood (``high`` less ``low`` beyond the noise): float32 as NumPy computes them,
-    False where no reading. ``lens`` is fx, fy, cx, cy; ``plane`` and ``limits`` as for
-    :func:`surface_heights`."""
+) -> npt.NDArray[np.bool_]:
+    """Whether each pixel faces up: the normal from the gradient, ``reach`` pixels either
+    side, of the depth box-filtered over ``2 reach + 1`` (``total`` over ``weight``; no normal
+    where fewer than half the window's readings), within the steepest top of the support's
+    normal; float32 as NumPy computes it, False where no reading. ``lens`` is fx, fy, cx, cy;
+    ``plane`` and ``limits`` as for :func:`surface_heights`."""
     rows, cols = depth.shape
     fx, fy, cx, cy = lens[0], lens[1], lens[2], lens[3]
     n0, n1, n2 = plane[0], plane[1], plane[2]
-    cos_max, step_sigmas, min_step = limits[1], limits[2], limits[3]
-    up = np.zeros((rows, cols), dtype=np.bool_)
-    step = np.zeros((rows, cols), dtype=np.bool_)
-    span = np.float32(2 * reach)
+    cos_max = limits[1]
+    window = 2 * reach + 1
+    min_weight = np.float32(0.5 * window * window)
+    smooth = np.empty((rows, cols), dtype=np.float32)
     for r in range(rows):
         for c in range(cols):
-            bound = step_sigmas * sigma[r, c]
-            step[r, c] = high[r, c] - low[r, c] > (bound if bound > min_step else min_step)
+            if weight[r, c] < min_weight:
+                smooth[r, c] = np.nan
+            else:
+                smooth[r, c] = total[r, c] / weight[r, c]
+    up = np.zeros((rows, cols), dtype=np.bool_)
+    span = np.float32(2 * reach)
     for r in range(reach, rows - reach):
         v = np.float32(r) - cy
         for c in range(reach, cols - reach):
@@ -627,13 +624,30 @@ def surface_facing(
             nz = smooth[r, c] + u * dz_u + v * dz_v
             along = -(nx * n0 + ny * n1 + nz * n2)
             norm = np.sqrt(nx * nx + ny * ny + nz * nz)
-            up[r, c] = along > cos_max * norm
+            up[r, c] = along > cos_max * norm and np.isfinite(depth[r, c])
+    return up
+
+
+@numba.njit(cache=True, nogil=True)
+def surface_steps(
+    depth: Float32Array,
+    sigma: Float32Array,
+    high: Float32Array,
+    low: Float32Array,
+    limits: Float32Array,
+) -> npt.NDArray[np.bool_]:
+    """Whether the height steps across each pixel's 3 x 3 neighbourhood: ``high`` less
+    ``low`` beyond the step in sigmas (and the least step), float32 as NumPy computes it;
+    False where no reading. ``limits`` as for :func:`surface_heights`."""
+    rows, cols = depth.shape
+    step_sigmas, min_step = limits[2], limits[3]
+    step = np.zeros((rows, cols), dtype=np.bool_)
     for r in range(rows):
         for c in range(cols):
-            if not np.isfinite(depth[r, c]):
-                up[r, c] = False
-                step[r, c] = False
-    return up, step
+            bound = step_sigmas * sigma[r, c]
+            step[r, c] = high[r, c] - low[r, c] > (bound if bound > min_step else min_step)
+            step[r, c] = step[r, c] and np.isfinite(depth[r, c])
+    return step
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
@@ -1051,9 +1065,10 @@ def warm_up() -> None:
     grow(grid, flat, np.ones((2, 2), dtype=np.bool_), flat + 1.0, 1)
     measure_tops(np.array([0, 2]), a, a, a, a + 1.0, a, one, a, a, np.eye(3), 1.0, a, a, 0.25)
     picture = np.ones((3, 3), dtype=np.float32)
-    lens, plane, limits = (np.ones(k, dtype=np.float32) for k in (4, 6, 5))
-    surface_heights(picture, picture, picture, picture, plane, limits)
-    surface_facing(picture, picture, picture, picture, picture, 1, lens, plane, limits)
+    lens, plane, limits = (np.ones(k, dtype=np.float32) for k in (4, 6, 6))
+    surface_heights(picture, picture, plane, limits)
+    faces_up(picture, picture, picture, 1, lens, plane, limits)
+    surface_steps(picture, picture, picture, picture, limits)
     sight(a, a, a, np.eye(3), 1.0, picture, np.ones(4))
     tops_ab = np.ones((1, 2))
     probe_round(

@@ -101,12 +101,13 @@ def height_slope(
 
 def read_surface(depth_m: Float32Array, lens: Intrinsics, support: Support) -> Surface:
     """Heights, noise, facing and steps for every pixel (see the module docstring): the box
-    filter and the 3 x 3 spread by OpenCV, the rest in two passes
+    filters and the 3 x 3 spread by OpenCV, the rest in numba passes
     (:func:`onebox.perception.kernels.surface_heights`, :func:`~onebox.perception.kernels.
-    surface_facing`)."""
+    faces_up`, :func:`~onebox.perception.kernels.surface_steps`)."""
     rows, cols = depth_m.shape
     slope = height_slope(lens, cols, rows, support.normal_camera)
-    valid = np.isfinite(depth_m)
+    depth = np.ascontiguousarray(depth_m, dtype=np.float32)
+    valid = np.isfinite(depth)
     reach = normal_reach(support)
     lens_f = np.array([lens.fx, lens.fy, lens.cx, lens.cy], dtype=np.float32)
     plane = np.array(
@@ -118,52 +119,48 @@ def read_surface(depth_m: Float32Array, lens: Intrinsics, support: Support) -> S
         ],
         dtype=np.float32,
     )
-    depth = np.ascontiguousarray(depth_m, dtype=np.float32)
-    weight, total, limits = _box_filtered(depth, valid, reach)
-    height, sigma, smooth, for_high, for_low = kernels.surface_heights(
-        depth, slope, weight, total, plane, limits
-    )
-    # The 3 x 3 spread of heights; no reading counts as neither high nor low.
-    square = np.ones((3, 3), np.uint8)
-    high = np.asarray(cv2.dilate(for_high, square), dtype=np.float32)
-    low = np.asarray(cv2.erode(for_low, square), dtype=np.float32)
-    up, step = kernels.surface_facing(depth, smooth, sigma, high, low, reach, lens_f, plane, limits)
-    # A top a few pixels wide has no pixel whose wide window misses its edges: where the noise
-    # is small against a pixel's footprint, the gradient across one pixel either side is
-    # steady enough to say which way it faces.
-    with np.errstate(invalid="ignore"):
-        quiet = sigma < QUIET_SHARE * depth_m / np.float32(lens.fx)
-    if quiet.any():
-        weight, total, limits = _box_filtered(depth, valid, 1)
-        _, _, smooth, _, _ = kernels.surface_heights(depth, slope, weight, total, plane, limits)
-        up_near, _ = kernels.surface_facing(
-            depth, smooth, sigma, high, low, 1, lens_f, plane, limits
-        )
-        up |= up_near & quiet
-    return Surface(height, sigma, up, step, slope, reach)
-
-
-def _box_filtered(
-    depth: Float32Array, valid: BoolArray, reach: int
-) -> tuple[Float32Array, Float32Array, Float32Array]:
-    """The count and the sum of the readings in a window ``reach`` pixels either side of each
-    pixel, and the limits :func:`kernels.surface_heights` and :func:`kernels.surface_facing`
-    take (the least count: half the window)."""
-    window = 2 * reach + 1
-    weight = cv2.boxFilter(valid.astype(np.float32), -1, (window, window), normalize=False)
-    filled = np.where(valid, depth, np.float32(0.0)).astype(np.float32)
-    total = cv2.boxFilter(filled, -1, (window, window), normalize=False)
     limits = np.array(
         [
             SIGMA_FLOOR_M,
             math.cos(math.radians(MAX_TOP_TILT_DEG)),
             STEP_SIGMAS,
             MIN_STEP_M,
-            0.5 * window * window,
+            QUIET_SHARE,
+            lens.fx,
         ],
         dtype=np.float32,
     )
-    return np.asarray(weight, dtype=np.float32), np.asarray(total, dtype=np.float32), limits
+    height, sigma, for_high, for_low, quiet = kernels.surface_heights(depth, slope, plane, limits)
+    counted = valid.astype(np.float32)
+    filled = np.where(valid, depth, np.float32(0.0)).astype(np.float32)
+
+    def facing(reach: int) -> BoolArray:
+        window = (2 * reach + 1, 2 * reach + 1)
+        weight = cv2.boxFilter(counted, -1, window, normalize=False)
+        total = cv2.boxFilter(filled, -1, window, normalize=False)
+        up: BoolArray = kernels.faces_up(
+            depth,
+            np.asarray(weight, dtype=np.float32),
+            np.asarray(total, dtype=np.float32),
+            reach,
+            lens_f,
+            plane,
+            limits,
+        )
+        return up
+
+    up = facing(reach)
+    # A top a few pixels wide has no pixel whose wide window misses its edges: where the noise
+    # is small against a pixel's footprint, the gradient across one pixel either side is
+    # steady enough to say which way it faces.
+    if quiet.any():
+        up |= facing(1) & quiet
+    # The 3 x 3 spread of heights; no reading counts as neither high nor low.
+    square = np.ones((3, 3), np.uint8)
+    high = np.asarray(cv2.dilate(for_high, square), dtype=np.float32)
+    low = np.asarray(cv2.erode(for_low, square), dtype=np.float32)
+    step = kernels.surface_steps(depth, sigma, high, low, limits)
+    return Surface(height, sigma, up, step, slope, reach)
 
 
 def normal_reach(support: Support) -> int:
