@@ -367,6 +367,15 @@ class Round:
     """(n,): the share of its four corners something nearer hides."""
 
 
+_PROBE_SPREAD = np.linspace(-0.8, 0.8, PROBES_PER_SIDE)
+"""Where the probes past a side are along it: its middle 80 %, in shares of its half."""
+_COVER_LINE = np.linspace(-0.45, 0.45, COVER_GRID)
+_COVER_S, _COVER_T = (v.ravel() for v in np.meshgrid(_COVER_LINE, _COVER_LINE, indexing="ij"))
+"""The grid on a top's rectangle looked at for what hides it: shares of its length and width."""
+_FACE_SPREAD = np.linspace(-0.6, 0.6, 5)
+"""Where the points on a side's plane are along it: its middle 60 %, in shares of its half."""
+
+
 def _look_round(
     tops: Tops,
     origin: tuple[int, int],
@@ -386,7 +395,7 @@ def _look_round(
         tops.length_m,
         tops.width_m,
         reach,
-        np.linspace(-0.8, 0.8, PROBES_PER_SIDE),
+        _PROBE_SPREAD,
         tops.height_m,
         tops.basis,
         support.offset_camera_m,
@@ -426,9 +435,7 @@ def _covered(
 ) -> tuple[Float64Array, Float64Array]:
     """How much of each top's rectangle, and of its four corners, something nearer hides (a
     box standing on it, an object in front): a grid of points on the rectangle, looked at."""
-    grid = np.linspace(-0.45, 0.45, COVER_GRID)
-    s_grid, t_grid = np.meshgrid(grid, grid, indexing="ij")
-    s, t = s_grid.ravel(), t_grid.ravel()
+    s, t = _COVER_S, _COVER_T
     z_expected, seen = kernels.probe_cover(
         tops.middle_ab,
         tops.axis_ab,
@@ -445,7 +452,7 @@ def _covered(
     tolerance = np.maximum(3.0 * tops.sigma_m, 0.006)[:, None]
     with np.errstate(invalid="ignore"):
         nearer = seen < z_expected - 4.0 * tolerance
-    corner = (np.abs(s) == grid[-1]) & (np.abs(t) == grid[-1])
+    corner = (np.abs(s) == _COVER_LINE[-1]) & (np.abs(t) == _COVER_LINE[-1])
     return nearer.mean(axis=1), nearer[:, corner].mean(axis=1)
 
 
@@ -494,7 +501,7 @@ def _on_sides(
         tops.length_m,
         tops.width_m,
         tops.depth_m / lens.fx,
-        np.linspace(-0.6, 0.6, 5),
+        _FACE_SPREAD,
         np.ascontiguousarray(height_m, dtype=np.float64),
         tops.basis,
         support.offset_camera_m,

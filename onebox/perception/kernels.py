@@ -1052,6 +1052,23 @@ def standing_bounds(
     return first_row, last_row, first_col, last_col
 
 
+@numba.njit(cache=True, nogil=True)
+def plane_votes(
+    points: Float64Array, threshold: Float64Array, normals: Float64Array, offsets: Float64Array
+) -> npt.NDArray[np.int64]:
+    """For each plane (``normals`` (m, 3), ``offsets``), how many of ``points`` (n, 3) lie
+    within their own ``threshold`` of it."""
+    votes = np.zeros(len(normals), dtype=np.int64)
+    for j in range(len(normals)):
+        n0, n1, n2, offset = normals[j, 0], normals[j, 1], normals[j, 2], offsets[j]
+        count = 0
+        for i in range(len(points)):
+            residual = points[i, 0] * n0 + points[i, 1] * n1 + points[i, 2] * n2 + offset
+            count += abs(residual) < threshold[i]
+        votes[j] = count
+    return votes
+
+
 def warm_up() -> None:
     """Compile (or load from the cache) every kernel on a tiny input."""
     label = np.zeros(2, dtype=np.int32)
@@ -1084,6 +1101,7 @@ def warm_up() -> None:
     clean_depth(flat)
     standing_bounds(flat, flat, 1.0, 0.01)
     seam_pixels(np.zeros((2, 2), dtype=np.uint8), flat, flat, 1.0, 1.0)
+    plane_votes(np.eye(3), a[:1].repeat(3), np.eye(3), a[:1].repeat(3))
     one_top = np.ones((1, 2))
     seam_cuts(
         np.arange(2),

@@ -32,6 +32,7 @@ import numpy as np
 import numpy.typing as npt
 
 from onebox.geometry import Intrinsics
+from onebox.perception import kernels
 
 Float32Array = npt.NDArray[np.float32]
 Float64Array = npt.NDArray[np.float64]
@@ -164,8 +165,9 @@ def _ransac(
         normals, offsets = normals[keep], offsets[keep]
     if len(normals) == 0:
         return None
-    residual = np.abs(points @ normals.T + offsets)
-    votes = (residual < threshold[:, np.newaxis]).sum(axis=0)
+    votes = kernels.plane_votes(
+        points, threshold, np.ascontiguousarray(normals), np.ascontiguousarray(offsets)
+    )
     best = int(votes.argmax())
     return normals[best], float(offsets[best])
 
