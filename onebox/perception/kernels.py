@@ -550,11 +550,20 @@ def surface_heights(
     slope: Float32Array,
     plane: Float32Array,
     limits: Float32Array,
-) -> tuple[Float32Array, Float32Array, Float32Array, Float32Array, npt.NDArray[np.bool_]]:
+) -> tuple[
+    Float32Array,
+    Float32Array,
+    Float32Array,
+    Float32Array,
+    npt.NDArray[np.bool_],
+    Float32Array,
+    Float32Array,
+]:
     """Every pixel's height and noise (:func:`onebox.perception.surface.read_surface`), in
     float32 as NumPy computes them; its height for the 3 x 3 highest and lowest (-inf and inf
-    where no reading, which is neither); and whether its noise is quiet (under a share of its
-    footprint, ``depth / fx``).
+    where no reading, which is neither); whether its noise is quiet (under a share of its
+    footprint, ``depth / fx``); and, to box-filter, 1 and its depth where it has a reading
+    (0 and 0 where not).
 
     ``plane`` is the support's normal (optical frame), offset, sigma and 1 / its distance;
     ``limits`` the noise floor, the cosine of the steepest top, the step in sigmas, the least
@@ -567,6 +576,8 @@ def surface_heights(
     for_high = np.empty((rows, cols), dtype=np.float32)
     for_low = np.empty((rows, cols), dtype=np.float32)
     quiet = np.empty((rows, cols), dtype=np.bool_)
+    counted = np.zeros((rows, cols), dtype=np.float32)
+    filled = np.zeros((rows, cols), dtype=np.float32)
     for r in range(rows):
         for c in range(cols):
             d = depth[r, c]
@@ -580,7 +591,10 @@ def surface_heights(
             finite = np.isfinite(d)
             for_high[r, c] = h if finite else -np.inf
             for_low[r, c] = h if finite else np.inf
-    return height, sigma, for_high, for_low, quiet
+            if finite:
+                counted[r, c] = 1.0
+                filled[r, c] = d
+    return height, sigma, for_high, for_low, quiet, counted, filled
 
 
 @numba.njit(cache=True, nogil=True)

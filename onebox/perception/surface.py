@@ -107,7 +107,6 @@ def read_surface(depth_m: Float32Array, lens: Intrinsics, support: Support) -> S
     rows, cols = depth_m.shape
     slope = height_slope(lens, cols, rows, support.normal_camera)
     depth = np.ascontiguousarray(depth_m, dtype=np.float32)
-    valid = np.isfinite(depth)
     reach = normal_reach(support)
     lens_f = np.array([lens.fx, lens.fy, lens.cx, lens.cy], dtype=np.float32)
     plane = np.array(
@@ -130,9 +129,9 @@ def read_surface(depth_m: Float32Array, lens: Intrinsics, support: Support) -> S
         ],
         dtype=np.float32,
     )
-    height, sigma, for_high, for_low, quiet = kernels.surface_heights(depth, slope, plane, limits)
-    counted = valid.astype(np.float32)
-    filled = np.where(valid, depth, np.float32(0.0)).astype(np.float32)
+    height, sigma, for_high, for_low, quiet, counted, filled = kernels.surface_heights(
+        depth, slope, plane, limits
+    )
 
     def facing(reach: int) -> BoolArray:
         window = (2 * reach + 1, 2 * reach + 1)

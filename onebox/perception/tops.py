@@ -246,7 +246,7 @@ def join_hidden(
         parent = parent[parent]
     _, compact = np.unique(parent, return_inverse=True)
     lookup = np.concatenate([[0], compact + 1]).astype(np.int32)
-    result: IntArray = lookup[tops.labels]
+    result: IntArray = np.take(lookup, tops.labels)
     return result
 
 
