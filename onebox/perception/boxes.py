@@ -748,7 +748,8 @@ def _report(
 def quaternion(m: Float64Array) -> Float64Array:
     """x, y, z, w of a rotation matrix (Shepperd's method: the largest of the four first)."""
     trace = m[0, 0] + m[1, 1] + m[2, 2]
-    i = int(np.argmax([m[0, 0], m[1, 1], m[2, 2], trace]))
+    diagonal = [m[0, 0], m[1, 1], m[2, 2], trace]
+    i = diagonal.index(max(diagonal))  # the first largest, as np.argmax
     if i == 3:
         w = math.sqrt(1.0 + trace) / 2
         q = [
@@ -767,7 +768,7 @@ def quaternion(m: Float64Array) -> Float64Array:
     result: Float64Array = np.asarray(q, dtype=np.float64)
     if result[3] < 0:
         result = -result
-    return result / float(np.linalg.norm(result))
+    return result / math.sqrt(result.dot(result))  # np.linalg.norm's own sum
 
 
 def _vec(v: Float64Array) -> Vec3:
