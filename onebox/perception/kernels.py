@@ -1,8 +1,13 @@
-"""The few per-region loops no library does, compiled with numba (cached on disk where the
-install allows; :func:`warm_up` compiles them before the first picture).
+"""The finder's loops over pixels, tops and probes, compiled with numba (cached on disk where
+the install allows; :func:`warm_up` compiles them before the first picture).
 
-Each takes flat arrays of the pixels of every top at once, with each pixel's top index, and
-fills one row per top: one pass over the pixels, whatever the number of tops.
+Each does in one or a few passes what would otherwise be dozens of NumPy calls, each making a
+temporary array: over the picture (the surface reading, the standing pixels, cleaning the
+depth, the seam pixels), over the pixels of every top at once, top by top (measuring them,
+their cross-sections at seams), or over the points looked at round every top (the probes).
+Each computes what the NumPy it replaced did, in the same order and precision (float32 where
+the picture is float32), so the finder's results do not change with it; the docstrings say
+what each computes. ``extents`` is kept for ``benchmarks/bench_kernels.py``.
 """
 
 from __future__ import annotations
@@ -1089,7 +1094,6 @@ def warm_up() -> None:
     a = np.array([0.0, 1.0])
     one = np.ones(2, dtype=np.bool_)
     rectangle_angles(np.array([0, 2]), a, a, np.array([0.0, 0.5]), np.array([0.0, 0.1]))
-    extents(label, a, a, 1)
     grid = np.zeros((2, 2), dtype=np.int32)
     grid[0, 0] = 1
     flat = np.zeros((2, 2), dtype=np.float32)
