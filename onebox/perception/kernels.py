@@ -1088,6 +1088,35 @@ def plane_votes(
     return votes
 
 
+@numba.njit(cache=True, nogil=True)
+def grid_sample(
+    depth: Float32Array, stride: int, across: Float64Array, down: Float64Array
+) -> tuple[Float64Array, npt.NDArray[np.intp]]:
+    """The optical-frame points (n, 3) of the readings (0 < depth < inf) at every ``stride``-th
+    pixel each way from ``stride // 2``, in the picture's order, and their flat indices;
+    ``across`` and ``down`` are the rays' x/z per column and y/z per row."""
+    rows, cols = depth.shape
+    first = stride // 2
+    count = 0
+    for r in range(first, rows, stride):
+        for c in range(first, cols, stride):
+            if depth[r, c] > 0 and depth[r, c] < np.inf:
+                count += 1
+    points = np.empty((count, 3))
+    index = np.empty(count, dtype=np.intp)
+    i = 0
+    for r in range(first, rows, stride):
+        for c in range(first, cols, stride):
+            d = np.float64(depth[r, c])
+            if d > 0 and d < np.inf:
+                points[i, 0] = across[c] * d
+                points[i, 1] = down[r] * d
+                points[i, 2] = d
+                index[i] = r * cols + c
+                i += 1
+    return points, index
+
+
 def warm_up() -> None:
     """Compile (or load from the cache) every kernel on a tiny input."""
     label = np.zeros(2, dtype=np.int32)
@@ -1120,6 +1149,7 @@ def warm_up() -> None:
     standing_bounds(flat, flat, 1.0, 0.01)
     seam_pixels(np.zeros((2, 2), dtype=np.uint8), flat, flat, 1.0, 1.0)
     plane_votes(np.eye(3), a[:1].repeat(3), np.eye(3), a[:1].repeat(3))
+    grid_sample(flat, 1, a, a)
     one_top = np.ones((1, 2))
     seam_cuts(
         np.arange(2),

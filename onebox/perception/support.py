@@ -102,16 +102,10 @@ def _sample(depth_m: Float32Array, lens: Intrinsics) -> tuple[Float64Array, IntA
     """Optical-frame points of a grid sample of readings, and their flat pixel indices."""
     height, width = depth_m.shape
     stride = max(1, int(math.sqrt(height * width / SAMPLE_POINTS)))
-    grid = depth_m[stride // 2 :: stride, stride // 2 :: stride]
-    with np.errstate(invalid="ignore"):
-        ok = (grid > 0) & (grid < np.inf)
-    rows, cols = np.nonzero(ok)
-    rows = rows * stride + stride // 2
-    cols = cols * stride + stride // 2
     across, down = lens.rays(width, height)
-    d = depth_m[rows, cols].astype(np.float64)
-    points = np.stack([across[cols] * d, down[rows] * d, d], axis=1)
-    return points, rows * width + cols
+    return kernels.grid_sample(
+        np.ascontiguousarray(depth_m, dtype=np.float32), stride, across, down
+    )
 
 
 def _initial_threshold(
