@@ -124,14 +124,12 @@ def depth_quantum(depth_m: Float32Array) -> float:
     structured-light camera reports whole (or eighth) disparities, so its depth comes in steps
     that grow as z^2. Measured as a low percentile of the non-zero differences between
     horizontal neighbours on a grid of rows (0 for a renderer's continuous depth)."""
-    rows = depth_m[:: max(1, depth_m.shape[0] // 48)].astype(np.float64)
-    diff = np.abs(np.diff(rows, axis=1))
-    z = rows[:, 1:]
-    with np.errstate(invalid="ignore"):
-        ok = (diff > 0) & (diff < 0.02 * z)
-    if ok.sum() < 100:
+    steps = kernels.depth_steps(
+        np.ascontiguousarray(depth_m, dtype=np.float32), max(1, depth_m.shape[0] // 48)
+    )
+    if len(steps) < 100:
         return 0.0
-    return float(np.percentile(diff[ok] / (z[ok] * z[ok]), 20))
+    return float(np.percentile(steps, 20))
 
 
 def _ransac(
@@ -146,7 +144,16 @@ def _ransac(
         return None
     picks = rng.integers(0, count, size=(HYPOTHESES, 3))
     a, b, c = points[picks[:, 0]], points[picks[:, 1]], points[picks[:, 2]]
-    normals = np.cross(b - a, c - a)
+    u, v = b - a, c - a
+    # np.cross's products, written out (np.cross costs more than the rest of the round).
+    normals = np.stack(
+        [
+            u[:, 1] * v[:, 2] - u[:, 2] * v[:, 1],
+            u[:, 2] * v[:, 0] - u[:, 0] * v[:, 2],
+            u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0],
+        ],
+        axis=1,
+    )
     length = np.linalg.norm(normals, axis=1)
     good = length > 1e-12
     normals = normals[good] / length[good, np.newaxis]
