@@ -214,7 +214,8 @@ def measure_tops(
 
     Returns per top (n): pixels, mean depth, mean sigma, height at the rectangle's middle,
     middle (n, 2), axis (n, 2), length, width, area, fill, corners, rms, sag, sag share,
-    tilt (degrees) and slope (n, 2), as :class:`onebox.perception.tops.Tops` holds them."""
+    tilt (degrees), slope (n, 2) and the points' mean a, b and h (n, 3), as
+    :class:`onebox.perception.tops.Tops` holds them."""
     n = len(start) - 1
     # The outline's points, top by top, for the rectangle's angle.
     edges = 0
@@ -249,6 +250,7 @@ def measure_tops(
     sag_share = np.zeros(n)
     tilt = np.zeros(n)
     slope = np.zeros((n, 2))
+    centroid = np.zeros((n, 3))
     residual = np.empty(len(a))
     p = np.empty(len(a))
     q = np.empty(len(a))
@@ -265,6 +267,7 @@ def measure_tops(
             sum_z += z[i]
             sum_sigma += sigma[i]
         mean_a, mean_b, mean_h = sum_a / safe, sum_b / safe, sum_h / safe
+        centroid[k, 0], centroid[k, 1], centroid[k, 2] = mean_a, mean_b, mean_h
         mean_z[k], mean_sigma[k] = sum_z / safe, sum_sigma / safe
         # The top's plane, h = alpha a + beta b + gamma, by least squares about its middle.
         saa = sab = sbb = sah = sbh = 0.0
@@ -394,6 +397,7 @@ def measure_tops(
         sag_share,
         tilt,
         slope,
+        centroid,
     )
 
 

@@ -96,6 +96,8 @@ class Tops:
     """The top plane's angle to the support."""
     slope_ab: Float64Array
     """(n, 2): the top plane's rise along e1 and e2 (height = height_m + slope . offset)."""
+    centroid_abh: Float64Array
+    """(n, 3): the mean of the top's points' a, b and height."""
     depth_m: Float64Array
     """The top's mean distance along the optical axis."""
     sigma_m: Float64Array
@@ -195,12 +197,7 @@ def join_hidden(
     # One plane: the larger piece's plane, carried on to the smaller's points, meets them
     # there on average (a small piece's own plane leans with its smeared edges; a lid that
     # leans or bulges is at two heights in two places).
-    pts = tops.points
-    count = np.maximum(np.bincount(pts.top, minlength=n), 1)
-    centroid = np.stack(
-        [np.bincount(pts.top, weights=v, minlength=n) / count for v in (pts.a, pts.b, pts.h)],
-        axis=1,
-    )
+    centroid = tops.centroid_abh
     large = np.where(tops.pixels[i] >= tops.pixels[j], i, j)
     small = i + j - large
     carried = tops.height_m[large] + (
@@ -324,6 +321,7 @@ def _measure(
         sag_share,
         tilt,
         slope,
+        centroid,
     ) = kernels.measure_tops(
         start,
         a,
@@ -359,6 +357,7 @@ def _measure(
         sag_share=sag_share,
         tilt_deg=tilt,
         slope_ab=slope,
+        centroid_abh=centroid,
         depth_m=mean_z,
         sigma_m=sigma,
         pixels=pixels.astype(np.int32),
