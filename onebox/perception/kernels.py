@@ -585,8 +585,8 @@ def surface_heights(
     for_high = np.empty((rows, cols), dtype=np.float32)
     for_low = np.empty((rows, cols), dtype=np.float32)
     quiet = np.empty((rows, cols), dtype=np.bool_)
-    counted = np.zeros((rows, cols), dtype=np.float32)
-    filled = np.zeros((rows, cols), dtype=np.float32)
+    counted = np.empty((rows, cols), dtype=np.float32)
+    filled = np.empty((rows, cols), dtype=np.float32)
     for r in range(rows):
         for c in range(cols):
             d = depth[r, c]
@@ -600,13 +600,12 @@ def surface_heights(
             finite = np.isfinite(d)
             for_high[r, c] = h if finite else -np.inf
             for_low[r, c] = h if finite else np.inf
-            if finite:
-                counted[r, c] = 1.0
-                filled[r, c] = d
+            counted[r, c] = 1.0 if finite else 0.0
+            filled[r, c] = d if finite else 0.0
     return height, sigma, for_high, for_low, quiet, counted, filled
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def faces_up(
     depth: Float32Array,
     weight: Float32Array,
@@ -628,12 +627,12 @@ def faces_up(
     window = 2 * reach + 1
     min_weight = np.float32(0.5 * window * window)
     smooth = np.empty((rows, cols), dtype=np.float32)
+    nan = np.float32(np.nan)
     for r in range(rows):
         for c in range(cols):
-            if weight[r, c] < min_weight:
-                smooth[r, c] = np.nan
-            else:
-                smooth[r, c] = total[r, c] / weight[r, c]
+            # Branch-free (a select), so the compiler vectorises the loop.
+            mean = total[r, c] / weight[r, c]
+            smooth[r, c] = nan if weight[r, c] < min_weight else mean
     up = np.zeros((rows, cols), dtype=np.bool_)
     span = np.float32(2 * reach)
     for r in range(reach, rows - reach):
@@ -647,7 +646,10 @@ def faces_up(
             nz = smooth[r, c] + u * dz_u + v * dz_v
             along = -(nx * n0 + ny * n1 + nz * n2)
             norm = np.sqrt(nx * nx + ny * ny + nz * nz)
-            up[r, c] = along > cos_max * norm and np.isfinite(depth[r, c])
+            up[r, c] = along > cos_max * norm
+    for r in range(rows):
+        for c in range(cols):
+            up[r, c] &= np.isfinite(depth[r, c])
     return up
 
 
@@ -973,10 +975,9 @@ def standing(
             four = np.float32(4.0) * noise
             bound = four if (four != four or four > low) else low
             h = height[r, c]
-            stands = h > bound and h < high
+            stands = (h > bound) & (h < high)
             open_[r, c] = stands
-            if stands and up[r, c] and not step[r, c]:
-                core[r, c] = 1
+            core[r, c] = stands & up[r, c] & (not step[r, c])
             three = np.float32(3.0) * noise
             tolerance[r, c] = three if (three != three or three > least) else least
     return core, open_, tolerance
@@ -1024,8 +1025,9 @@ def seam_pixels(
     result = np.zeros((rows, cols), dtype=np.uint8)
     for r in range(rows):
         for c in range(cols):
-            if dark[r, c] > dark_step or gx[r, c] * gx[r, c] + gy[r, c] * gy[r, c] > edge:
-                result[r, c] = 1
+            on_line = dark[r, c] > dark_step
+            on_edge = gx[r, c] * gx[r, c] + gy[r, c] * gy[r, c] > edge
+            result[r, c] = on_line | on_edge
     return result
 
 
