@@ -7,10 +7,11 @@ and returns the :class:`Support` plane or None when no plane holds enough readin
 How:
 
 - A grid sample of at most ``SAMPLE_POINTS`` readings becomes optical-frame points.
-- RANSAC (all hypotheses evaluated at once, whole-array) with an inlier threshold that grows
-  with distance like stereo noise (sigma ~ z^2); then least squares on the inliers, the noise
-  estimated from their residuals (MAD), the inliers taken again at 3 sigma(z) and refitted;
-  how wide the noise's lumps are, from how alike neighbours' residuals are (:func:`lump_width`).
+- RANSAC (every hypothesis's votes counted in one compiled pass) with an inlier threshold
+  that grows with distance like stereo noise (sigma ~ z^2); then least squares on the
+  inliers, the noise estimated from their residuals (MAD), the inliers taken again at 3
+  sigma(z) and refitted; how wide the noise's lumps are, from how alike neighbours' residuals
+  are (:func:`lump_width`).
 - With a pose only planes within ``max_tilt_deg`` of world up count; without one the largest
   plane sets "up". Up to three planes are found in turn; among those holding at least
   ``MIN_SHARE`` of the readings and facing the same way the LOWEST is the support (the floor
