@@ -159,7 +159,41 @@ def read_surface(depth_m: Float32Array, lens: Intrinsics, support: Support) -> S
     high = np.asarray(cv2.dilate(for_high, square), dtype=np.float32)
     low = np.asarray(cv2.erode(for_low, square), dtype=np.float32)
     step = kernels.surface_steps(depth, sigma, high, low, limits)
+    if not lumpy(support):
+        # Independent errors' tails make steps here and there on a flat top and shatter it: a
+        # step counts where the heights through a 3 x 3 median step too, a pixel away at most
+        # (the median rounds a corner off), or at a crack a pixel wide (which it wipes out).
+        valid = counted > 0
+        threshold = np.maximum(STEP_SIGMAS * sigma, np.float32(MIN_STEP_M))
+        settled = np.asarray(
+            cv2.medianBlur(np.where(valid, height, 0.0).astype(np.float32), 3), np.float32
+        )
+        with np.errstate(invalid="ignore"):
+            crack = (
+                (height < np.roll(height, 1, 1) - threshold)
+                & (height < np.roll(height, -1, 1) - threshold)
+            ) | (
+                (height < np.roll(height, 1, 0) - threshold)
+                & (height < np.roll(height, -1, 0) - threshold)
+            )
+        near = (_spread(settled, valid) > threshold) | crack
+        step &= cv2.dilate(near.astype(np.uint8), square) > 0
     return Surface(height, sigma, up, step, slope, reach)
+
+
+def _spread(height: Float32Array, valid: BoolArray) -> Float32Array:
+    """The 3 x 3 spread of heights; no reading counts as neither high nor low."""
+    square = np.ones((3, 3), np.uint8)
+    high = cv2.dilate(np.where(valid, height, -np.inf).astype(np.float32), square)
+    low = cv2.erode(np.where(valid, height, np.inf).astype(np.float32), square)
+    with np.errstate(invalid="ignore", over="ignore"):
+        result: Float32Array = high - low
+    return result
+
+
+def lumpy(support: Support) -> bool:
+    """Whether the depth's errors come in lumps wider than a pixel, large enough to matter."""
+    return support.lump_px > 1.0 and support.sigma_m > LUMPY_NOISE_M
 
 
 def normal_reach(support: Support) -> int:
