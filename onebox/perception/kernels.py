@@ -675,6 +675,37 @@ def surface_steps(
     return step
 
 
+@numba.njit(cache=True, nogil=True)
+def settled_steps(
+    height: Float32Array,
+    sigma: Float32Array,
+    high: Float32Array,
+    low: Float32Array,
+    limits: Float32Array,
+) -> npt.NDArray[np.uint8]:
+    """1 where ``high`` less ``low`` (the 3 x 3 spread of the heights a median settled) is
+    beyond the step (the step in sigmas, the least step), or where the pixel is a crack: lower
+    by the step than both its neighbours either side, along a row or a column (the picture
+    wrapping round at its edges, as ``np.roll`` does); float32 as NumPy computes it.
+    ``limits`` as for :func:`surface_heights`."""
+    rows, cols = height.shape
+    step_sigmas, min_step = limits[2], limits[3]
+    near = np.zeros((rows, cols), dtype=np.uint8)
+    for r in range(rows):
+        up = r - 1 if r > 0 else rows - 1
+        down = r + 1 if r < rows - 1 else 0
+        for c in range(cols):
+            bound = step_sigmas * sigma[r, c]
+            threshold = bound if (bound != bound or bound > min_step) else min_step
+            h = height[r, c]
+            left = c - 1 if c > 0 else cols - 1
+            right = c + 1 if c < cols - 1 else 0
+            across = (h < height[r, left] - threshold) & (h < height[r, right] - threshold)
+            along = (h < height[up, c] - threshold) & (h < height[down, c] - threshold)
+            near[r, c] = across | along | (high[r, c] - low[r, c] > threshold)
+    return near
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _sight_one(
     a: float,
@@ -1157,6 +1188,7 @@ def warm_up() -> None:
     surface_heights(picture, picture, plane, limits)
     faces_up(picture, picture, picture, 1, lens, plane, limits)
     surface_steps(picture, picture, picture, picture, limits)
+    settled_steps(picture, picture, picture, picture, limits)
     sight(a, a, a, np.eye(3), 1.0, picture, np.ones(4))
     tops_ab = np.ones((1, 2))
     probe_round(

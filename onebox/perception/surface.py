@@ -164,31 +164,20 @@ def read_surface(depth_m: Float32Array, lens: Intrinsics, support: Support) -> S
         # step counts where the heights through a 3 x 3 median step too, a pixel away at most
         # (the median rounds a corner off), or at a crack a pixel wide (which it wipes out).
         valid = counted > 0
-        threshold = np.maximum(STEP_SIGMAS * sigma, np.float32(MIN_STEP_M))
         settled = np.asarray(
-            cv2.medianBlur(np.where(valid, height, 0.0).astype(np.float32), 3), np.float32
+            cv2.medianBlur(np.where(valid, height, np.float32(0.0)), 3), np.float32
         )
-        with np.errstate(invalid="ignore"):
-            crack = (
-                (height < np.roll(height, 1, 1) - threshold)
-                & (height < np.roll(height, -1, 1) - threshold)
-            ) | (
-                (height < np.roll(height, 1, 0) - threshold)
-                & (height < np.roll(height, -1, 0) - threshold)
-            )
-        near = (_spread(settled, valid) > threshold) | crack
-        step &= cv2.dilate(near.astype(np.uint8), square) > 0
+        settled_high = np.where(valid, settled, np.float32(-np.inf))
+        settled_low = np.where(valid, settled, np.float32(np.inf))
+        near = kernels.settled_steps(
+            height,
+            sigma,
+            np.asarray(cv2.dilate(settled_high, square), np.float32),
+            np.asarray(cv2.erode(settled_low, square), np.float32),
+            limits,
+        )
+        step &= cv2.dilate(near, square) > 0
     return Surface(height, sigma, up, step, slope, reach)
-
-
-def _spread(height: Float32Array, valid: BoolArray) -> Float32Array:
-    """The 3 x 3 spread of heights; no reading counts as neither high nor low."""
-    square = np.ones((3, 3), np.uint8)
-    high = cv2.dilate(np.where(valid, height, -np.inf).astype(np.float32), square)
-    low = cv2.erode(np.where(valid, height, np.inf).astype(np.float32), square)
-    with np.errstate(invalid="ignore", over="ignore"):
-        result: Float32Array = high - low
-    return result
 
 
 def lumpy(support: Support) -> bool:
