@@ -1201,12 +1201,9 @@ def warm_up() -> None:
     top_points(grid, flat, flat, flat, flat[0], flat[0], np.eye(3))
     standing(flat, flat, one.reshape(1, 2), one.reshape(1, 2), 0.01, np.inf)
     drop_small(grid, 2)
-    clean_depth(flat)
     standing_bounds(flat, flat, 1.0, 0.01)
     seam_pixels(np.zeros((2, 2), dtype=np.uint8), flat, flat, 1.0, 1.0)
     plane_votes(np.eye(3), a[:1].repeat(3), np.eye(3), a[:1].repeat(3))
-    grid_sample(flat, 1, a, a)
-    depth_steps(flat, 1)
     one_top = np.ones((1, 2))
     seam_cuts(
         np.arange(2),
@@ -1223,3 +1220,13 @@ def warm_up() -> None:
         np.full(1, 2, dtype=np.int32),
         np.ones(6),
     )
+    # A picture decoded from a message and the lens's cached rays are read-only arrays, for
+    # which numba compiles a kernel apart: the kernels that take them are compiled for both.
+    frozen = flat.copy()
+    frozen.flags.writeable = False
+    rays = a.copy()
+    rays.flags.writeable = False
+    for depth in (flat, frozen):
+        clean_depth(depth)
+        grid_sample(depth, 1, rays, rays)
+        depth_steps(depth, 1)
