@@ -11,7 +11,15 @@ from collections.abc import Iterator
 import pytest
 
 from onebox import bus
+from onebox.perception import kernels
 from onebox.testing.processes import Inbox, Processes, bus_args, private_router
+
+
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """Compile the finder's kernels into numba's cache once, before any locator process
+    starts: each then loads them in a fraction of a second instead of compiling them itself
+    against a test's timeout."""
+    kernels.warm_up()
 
 
 @pytest.fixture
