@@ -53,7 +53,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from onebox import bus, pictures
 from onebox.recording import stamp_ns as stamp_of
 from onebox.testing.processes import Processes, bus_args, free_port
-from onebox.testing.realdata import COMMITTED, RealCapture, RealDataError, read_capture
+from onebox.testing.realdata import (
+    COMMITTED,
+    SHARED,
+    RealCapture,
+    RealDataError,
+    default_folder,
+    read_capture,
+)
 from onebox.testing.synthetic import (
     OPTICAL,
     Scene,
@@ -75,9 +82,6 @@ from schemas import (
     codec,
 )
 
-ROOT = Path(__file__).resolve().parent.parent
-SHARED = ROOT.parent / "shared" / "realdata"
-"""The full folder of real captures, kept beside the repository (some may not be committed)."""
 WARM_UP_S = 60.0
 """How long the locator may take to answer its first capture (starting, compiling)."""
 
@@ -413,7 +417,7 @@ def main() -> int:
     args = parse_args()
     feed: Feed | None = None
     if args.capture is not None:
-        data = args.data or (SHARED if SHARED.is_dir() else COMMITTED)
+        data = args.data or default_folder()
         try:
             capture = read_capture(data, args.capture)
         except RealDataError as error:

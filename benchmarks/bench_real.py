@@ -43,18 +43,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from onebox.perception.boxes import Box, find_boxes
 from onebox.testing.realdata import (
     COMMITTED,
+    SHARED,
     RealCapture,
     RealDataError,
     Score,
     capture_names,
+    default_folder,
     detections_json,
     read_capture,
     score,
 )
 
-ROOT = Path(__file__).resolve().parent.parent
-SHARED = ROOT.parent / "shared" / "realdata"
-"""The full folder of real captures, kept beside the repository (some may not be committed)."""
 SOURCES = ("oakd", "posecnn", "mosd")
 
 
@@ -140,7 +139,7 @@ def main() -> int:
     parser.add_argument(
         "--data",
         type=Path,
-        default=SHARED if SHARED.is_dir() else COMMITTED,
+        default=default_folder(),
         help=f"a folder of real captures (default: {SHARED} if there, else {COMMITTED})",
     )
     parser.add_argument("--only", default="", help="only captures whose name contains this")

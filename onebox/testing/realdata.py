@@ -45,6 +45,7 @@ from onebox.geometry import Intrinsics
 
 __all__ = [
     "COMMITTED",
+    "SHARED",
     "BoxLike",
     "Detection",
     "Match",
@@ -54,6 +55,7 @@ __all__ = [
     "Support",
     "TopReference",
     "capture_names",
+    "default_folder",
     "detections_json",
     "read_capture",
     "read_captures",
@@ -65,6 +67,14 @@ __all__ = [
 
 COMMITTED = Path(__file__).resolve().parent.parent.parent / "tests" / "data" / "realdata"
 """The captures in the repository (the OAK-D and PoseCNN ones, MIT)."""
+SHARED = COMMITTED.parent.parent.parent.parent / "shared" / "realdata"
+"""The full folder of real captures, kept beside the repository (some may not be committed)."""
+
+
+def default_folder() -> Path:
+    """The full folder of captures when it is beside the repository, else the committed ones."""
+    return SHARED if SHARED.is_dir() else COMMITTED
+
 
 Vec3 = npt.NDArray[np.float64]
 Mask = npt.NDArray[np.bool_]
