@@ -17,10 +17,14 @@ The physical effects, one line each:
 - **Which way a surface faces.** The normal of the surface through a pixel follows from the
   depth's gradient alone: for ``P = z * ray``, ``n ~ (-fx z_u, -fy z_v, z + (u - cx) z_u +
   (v - cy) z_v)``. The gradient is taken across a few pixels of box-filtered depth (wider where
-  the noise is larger), so a top's noise does not turn it into a side. A top faces up within
-  ``MAX_TOP_TILT_DEG``; a side face, a can's flank or a smeared edge does not.
+  the noise is larger), so a top's noise does not turn it into a side; where the noise is
+  small against a pixel's footprint, also across one pixel either side, so a top a few pixels
+  wide keeps its facing. A top faces up within ``MAX_TOP_TILT_DEG``; a side face, a can's flank
+  or a smeared edge does not.
 - **Depth steps.** Where the height spread of a pixel's 3 x 3 neighbourhood passes
   ``STEP_SIGMAS`` sigma(z) (and ``MIN_STEP_M``), two surfaces meet: the pixel is a boundary.
+  With independent errors, only where the heights through a 3 x 3 median step too (a pixel
+  away at most) or at a crack a pixel wide: a noise tail is no edge.
 - **No reading.** NaN is nowhere: it faces no way and belongs to no top.
 """
 
