@@ -24,14 +24,15 @@ The pipeline, one module a physical effect:
      extent along that side is then a lower bound), a lower level, the picture's edge, and how
      much of its rectangle is not seen;
    - which tops are boxes (:func:`_boxes`): large enough, level, flat, not curved over their
-     middle half, filling their rectangle and its corners (of what is seen), not cut off, not
-     falling away on more than two sides;
+     middle half beyond its fitted sag's noise, filling their rectangle and its corners (of
+     what is seen), not cut off, not falling away on more than two sides past which no face of
+     their own is seen going down;
    - what each top stands on (:func:`_bases`): the support or a lower top, looked for at its
      own height just past the top's sides, within where the top's faces are seen to end
      (:func:`_face_bottom`), or where they end on a box sticking out under them;
    - what is no box after all: a top with nothing under its edges (:func:`_hollow`, a table on
      legs) and a platform (a top two boxes or more stand on that they mostly hide, or that
-     they stand on past a hidden side of it: a pallet's top and rim);
+     they stand on past one hidden side of it: a pallet's top and rim);
    - the report, with a catalogue's height and name where a top fits an entry.
 """
 
@@ -623,7 +624,8 @@ def _bases(
     only, and its own base level on the others). Ties go to the higher level. A level above
     where the top's faces are seen to end is none it stands on: its sides go on down past it
     (a box beside lower ones, seen from the side they do not hide), and a level found where
-    the faces end wins (a box on one a little wider, whose top shows past few probes); where
+    the faces end, past two sides or more, wins (a box on one a little wider, whose top shows
+    past few probes; a box beside a lower one finds that one past a single side); where
     the faces end on the face of a box sticking out under them, it stands there."""
     n = len(tops)
     lower = tops.height_m[None, :] < tops.height_m[:, None] - 0.01  # (k top, j lower)
