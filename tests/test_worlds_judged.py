@@ -7,14 +7,17 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import numpy as np
 import pytest
 
-from onebox.perception.boxes import FinderSettings
+from onebox.geometry import Intrinsics
+from onebox.perception.boxes import Box, FinderSettings, Found
 from onebox.perception.stream import BoxFinder
-from onebox.testing.judged import Judged, judge, render_scene
+from onebox.testing.judged import Judged, Rendered, judge, render_scene
 from onebox.world.noise import PRESETS
 from onebox.world.random_scene import looking_across, random_pallet, random_scene
 from onebox.world.spec import BoxDesc, CameraDesc, ObjectDesc, SceneDesc, TableDesc
+from schemas import BoxTruth, GroundTruth, Pose, Vector3
 
 # --- what the finder does wrong, by physical cause ------------------------------------------------
 # Each failing case is marked with what the finder does there, as measured (python -m pytest
@@ -461,3 +464,48 @@ def test_random_pallet_is_the_same_for_a_seed():
     assert random_pallet(11) == random_pallet(11)
     assert random_pallet(11) != random_pallet(12)
     assert random_pallet(11).boxes[0].size == (1.2, 0.8, 0.144)
+
+
+def test_the_judge_takes_the_part_seen_of_a_box_under_another_for_that_box():
+    """A carton half hidden under a box on it is reported at the strip that shows: the judge
+    pairs that report with the carton (its middle lies on the carton's top), counts it among
+    the partly hidden found and judges its height; a report on no top is false."""
+    carton = BoxTruth(
+        pose=Pose(position=Vector3(x=0.0, y=0.0, z=0.05)),
+        size=Vector3(x=0.3, y=0.2, z=0.1),
+        top_in_view=True,
+        top_pixels=500,
+    )
+    box = BoxTruth(
+        pose=Pose(position=Vector3(x=0.05, y=0.0, z=0.15)),
+        size=Vector3(x=0.1, y=0.1, z=0.1),
+        on=0,
+        top_in_view=True,
+        top_pixels=400,
+    )
+    camera = np.eye(4)
+    camera[2, 3] = 1.0
+    rendered = Rendered(
+        np.zeros((2, 2)),
+        np.zeros((2, 2, 3), np.uint8),
+        Intrinsics(1.0, 1.0, 0.0, 0.0),
+        camera,
+        GroundTruth(boxes=[carton, box]),
+        [1000, 400],
+    )
+
+    def reported(top: tuple[float, float, float], height: float, hidden: int) -> Box:
+        centre = (top[0], top[1], top[2] - height / 2)
+        return Box(centre, (0.0, 0.0, 0.0, 1.0), (0.1, 0.1, height), 0.0, 1.0, 100, top, 0,
+                   hidden_sides=hidden)  # fmt: skip
+
+    strip = reported((-0.11, 0.0, 0.1), 0.1, 1)  # 110 mm from the carton's middle, on its top
+    judged = Judged()
+    judge(
+        Found(None, [reported((0.05, 0.0, 0.2), 0.1, 0), strip, reported((0.5, 0.5, 0.1), 0.1, 0)]),
+        rendered,
+        judged,
+    )
+    assert (judged.found, judged.missed, judged.false) == (1, 0, 1), judged.notes
+    assert (judged.hidden, judged.hidden_found) == (1, 1)
+    assert judged.hidden_height_mm == [pytest.approx(0.0)]
