@@ -169,14 +169,14 @@ def find_tops(
     tops = _measure(labels, depth_m, surface, lens, basis)
     joined = join_hidden(tops, depth_m, lens, support)
     if joined is not None:
-        tops = _measure(joined, depth_m, surface, lens, basis)
+        tops = _measure(joined, depth_m, surface, lens, basis, tops)
     if seam is None:
         return tops
     for _ in range(SEAM_ROUNDS):
         split = seams.split_at_seams(tops, seam[0], seam[1])
         if split is None:
             break
-        tops = _measure(split, depth_m, surface, lens, basis)
+        tops = _measure(split, depth_m, surface, lens, basis, tops)
     return tops
 
 
@@ -294,9 +294,11 @@ def _measure(
     surface: Surface,
     lens: Intrinsics,
     basis: Float64Array,
+    before: Tops | None = None,
 ) -> Tops:
     """Step 5 of the module docstring for every top (:func:`kernels.top_points`, then
-    :func:`kernels.measure_tops`)."""
+    :func:`kernels.measure_tops`); a top with the same pixels as one of ``before`` (labels
+    joined or split elsewhere) keeps its measures: a top's measures are its pixels' alone."""
     rows, cols = labels.shape
     across, down = _rays(lens, cols, rows)
     start, index, top, a, b, h, z, sigma_px, edge, ray_x, ray_y = kernels.top_points(
@@ -304,6 +306,54 @@ def _measure(
     )
     n = len(start) - 1
     pts = Points(index, top, a, b, h, z)
+    kept = np.full(n, -1, dtype=np.intp) if before is None else _kept(before, labels, start)
+    todo = np.flatnonzero(kept < 0)
+    per_pixel = (a, b, h, z, sigma_px, edge, ray_x, ray_y)
+    todo_start = start
+    if len(todo) < n:
+        # Only the changed tops' pixels are measured (each top's in its order).
+        todo_start = np.zeros(len(todo) + 1, dtype=np.intp)
+        np.cumsum(start[todo + 1] - start[todo], out=todo_start[1:])
+        offset = np.repeat(start[todo] - todo_start[:-1], np.diff(todo_start))
+        picked = offset + np.arange(todo_start[-1])
+        per_pixel = tuple(values[picked] for values in per_pixel)
+    measured = kernels.measure_tops(
+        todo_start,
+        *per_pixel,
+        basis,
+        lens.fx * lens.fy,
+        ANGLES,
+        FINE_ANGLES,
+        PROFILE_SHARE,
+    )
+    if before is not None:
+        same = np.flatnonzero(kept >= 0)
+        known = (
+            before.pixels.astype(np.float64),
+            before.depth_m,
+            before.sigma_m,
+            before.height_m,
+            before.middle_ab,
+            before.axis_ab,
+            before.length_m,
+            before.width_m,
+            before.area_m2,
+            before.fill,
+            before.corners,
+            before.rms_m,
+            before.sag_m,
+            before.sag_share,
+            before.tilt_deg,
+            before.slope_ab,
+            before.centroid_abh,
+        )
+        merged = []
+        for new, old in zip(measured, known, strict=True):
+            full = np.empty((n, *new.shape[1:]), dtype=new.dtype)
+            full[todo] = new
+            full[same] = old[kept[same]]
+            merged.append(full)
+        measured = tuple(merged)
     (
         pixels,
         mean_z,
@@ -322,22 +372,7 @@ def _measure(
         tilt,
         slope,
         centroid,
-    ) = kernels.measure_tops(
-        start,
-        a,
-        b,
-        h,
-        z,
-        sigma_px,
-        edge,
-        ray_x,
-        ray_y,
-        basis,
-        lens.fx * lens.fy,
-        ANGLES,
-        FINE_ANGLES,
-        PROFILE_SHARE,
-    )
+    ) = measured
     border = np.zeros_like(labels, dtype=bool)
     border[[0, -1], :] = True
     border[:, [0, -1]] = True
@@ -365,3 +400,24 @@ def _measure(
         basis=basis,
         points=pts,
     )
+
+
+def _kept(before: Tops, labels: IntArray, start: npt.NDArray[np.intp]) -> npt.NDArray[np.intp]:
+    """For each top of ``labels`` (pixels from ``start``, as :func:`kernels.top_points` gives
+    them), the top of ``before`` with exactly its pixels, or -1. Joining and splitting only
+    regroup ``before``'s pixels: a top of ``before`` whose pixels all went to one new top with
+    as many pixels is that top."""
+    kept = np.full(len(start) - 1, -1, dtype=np.intp)
+    count = before.pixels.astype(np.intp)
+    seen = np.flatnonzero(count > 0)
+    if seen.size == 0:
+        return kept
+    first = (np.cumsum(count) - count)[seen]
+    now = labels.ravel()[before.points.index]
+    low = np.minimum.reduceat(now, first)
+    high = np.maximum.reduceat(now, first)
+    new = low.astype(np.intp) - 1
+    whole = (low == high) & (low > 0)
+    whole[whole] &= start[new[whole] + 1] - start[new[whole]] == count[seen[whole]]
+    kept[new[whole]] = seen[whole]
+    return kept
