@@ -87,6 +87,15 @@ def grow(
     within ``tolerance`` (the open pixel's) of the neighbour's it is reached from, at most
     ``steps`` pixels (8-connected, breadth first)."""
     rows, cols = labels.shape
+    # The labelled pixels with an open unlabelled one among their 8 neighbours: "free"
+    # pixels spread a column either way, then looked for a row either way.
+    free_near = np.empty((rows, cols), dtype=np.bool_)
+    for r in range(rows):
+        before, here = False, labels[r, 0] == 0 and open_[r, 0]
+        for c in range(cols):
+            after = c + 1 < cols and labels[r, c + 1] == 0 and open_[r, c + 1]
+            free_near[r, c] = before or here or after
+            before, here = here, after
     frontier = np.empty(rows * cols, dtype=np.int64)
     count = 0
     for r in range(rows):
@@ -95,9 +104,7 @@ def grow(
                 continue
             edge = False
             for rr in range(max(r - 1, 0), min(r + 2, rows)):
-                for cc in range(max(c - 1, 0), min(c + 2, cols)):
-                    if labels[rr, cc] == 0 and open_[rr, cc]:
-                        edge = True
+                edge |= free_near[rr, c]
             if edge:
                 frontier[count] = r * cols + c
                 count += 1
