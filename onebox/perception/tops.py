@@ -373,10 +373,8 @@ def _measure(
         slope,
         centroid,
     ) = measured
-    border = np.zeros_like(labels, dtype=bool)
-    border[[0, -1], :] = True
-    border[:, [0, -1]] = True
-    on_border = np.bincount(labels[border], minlength=n + 1)[1:] > 0
+    border = np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]])
+    on_border = np.bincount(border, minlength=n + 1)[1:] > 0
     return Tops(
         labels=labels,
         height_m=height,
