@@ -45,6 +45,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import msgspec
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -222,15 +223,7 @@ def capture_feed(capture: RealCapture, placed: bool) -> Feed:
         )
 
     def restamp(image: Image) -> Callable[[int], Image]:
-        return lambda stamp_ns: Image(
-            header=header(stamp_ns),
-            height=image.height,
-            width=image.width,
-            encoding=image.encoding,
-            is_bigendian=image.is_bigendian,
-            step=image.step,
-            data=image.data,
-        )
+        return lambda stamp_ns: msgspec.structs.replace(image, header=header(stamp_ns))
 
     return Feed(
         label=f"{capture.name}, {width} x {height}, 16UC1 + rgb8",

@@ -150,9 +150,9 @@ def judge(found: Found, rendered: Rendered, judged: Judged) -> None:
             if nearest < 0
             else max(0.02, 0.5 * min(boxes[nearest].size.x, boxes[nearest].size.y))
         )
-        # ... or the part seen of a box whose top is not all seen, its middle on that top
-        on = [i for i in sorted(unjudged - used) if _on_top_of(top, boxes[i])]
         if nearest < 0 or distances[nearest] > reach or nearest in used:
+            # ... or the part seen of a box whose top is not all seen, its middle on that top
+            on = [i for i in sorted(unjudged - used) if _on_top_of(top, boxes[i])]
             nearest = on[0] if on else -1
         if nearest < 0:
             judged.false += 1
