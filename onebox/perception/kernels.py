@@ -423,6 +423,10 @@ def _mean_run(
     return float((run_sum[upto] - before_sum) / max(run_count[upto] - before_count, 1.0))
 
 
+SEAM_FULL = 0.5
+"""A seam's cross-section holds at least this share of the top's typical one."""
+
+
 @numba.njit(cache=True, nogil=True)
 def seam_cuts(
     index: npt.NDArray[np.intp],
@@ -512,9 +516,13 @@ def seam_cuts(
             share[s] = sums[s, 1] / max(sums[s, 0], 1.0)
             position[s] = (s - offset[k] - 0.5) * step[k] - 0.5 * extent[k]
             margin = max(min_part, 3.0 * step[k])
+            # A seam runs across the whole top: its cross-section is no thinner than half a
+            # typical one (a sliver left beside something nearer is edged by its outline).
+            typical = pixels[k] * step[k] / max(extent[k], step[k])
             strong[s] = (
                 abs(position[s]) < 0.5 * extent[k] - margin
                 and sums[s, 0] >= 3
+                and sums[s, 0] >= SEAM_FULL * typical
                 and span[k] >= min_seam
                 and share[s] >= seam_share
                 and share[s] - print_share[k] >= over_print
