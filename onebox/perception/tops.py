@@ -187,8 +187,9 @@ def join_hidden(
     carton seen either side of a box standing on it, a lid behind a bottle), or None.
 
     Two pieces are one top when they lie at one height and everything seen on the line between
-    their middles, at that height, is one of them or something nearer hiding it (at least one
-    point of it: pieces that meet without anything in front were cut apart for a reason)."""
+    their middles, at that height, is one of them, that height left out of every top, or
+    something nearer hiding it (at least one point of it: pieces that meet without anything in
+    front were cut apart for a reason)."""
     n = len(tops)
     if n < 2:
         return None
@@ -220,6 +221,9 @@ def join_hidden(
     with np.errstate(invalid="ignore"):
         nearer = seen < z - np.maximum(tolerance[i], tolerance[j])[:, None]
     own = (label == i[:, None]) | (label == j[:, None])
+    # ... or the same surface left out of every top (an edge pixel beside the thing nearer).
+    with np.errstate(invalid="ignore"):
+        own |= (label < 0) & (np.abs(seen - z) <= np.maximum(tolerance[i], tolerance[j])[:, None])
     unread = np.isnan(seen)  # no reading says nothing against
     # ... or, a few pixels wide, they touch all the way (pinched in two by the opening).
     narrow = tops.width_m * lens.fx / tops.depth_m < PINCHED_PX
