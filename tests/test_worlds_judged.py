@@ -50,8 +50,7 @@ XFAIL_SCENE = {
     3: f"{LOWER}: box 1 (0.101 m on box 0) 0.211 m and box 5 (partly hidden) 0.011 m for 0.094, "
     "from box 6's top (0.083 m); box 0 (partly hidden) 0.146 m for 0.193, from box 2's top "
     "(0.047 m)",
-    4: f"{TWICE}: box 5, round box 7 on it (0.095 x 0.037 and 0.151 x 0.080 m, 1 false); "
-    f"{LOWER}: the first 0.276 m for 0.310 and box 1 (partly hidden) 0.073 m for 0.107, from "
+    4: f"{LOWER}: the first 0.276 m for 0.310 and box 1 (partly hidden) 0.073 m for 0.107, from "
     f"box 0's top (0.034 m); {BASE}: box 6 (partly hidden, on box 1) 0.167 m for 0.187, its "
     "base 20 mm above box 1's top",
     9: f"{LOWER}: box 0 (partly hidden) 0.018 m for 0.095, from box 1's top (0.077 m)",
@@ -65,7 +64,6 @@ XFAIL_PALLET = {
     2: f"{TWICE}: box 6, either side of the carton on it (0.283 x 0.071 and 0.274 x 0.079 m, 1 "
     "false)",
     5: f"{LOWER}: box 1 0.056 m for 0.300, from box 3 beside it (0.244 m)",
-    8: f"{TWICE}: box 2, round the carton on it (0.213 x 0.202 and 0.213 x 0.064 m, 1 false)",
     11: f"{SHADE}: boxes 2 and 5 one box 0.565 x 0.262 m (box 2 missed), box 4 joined with box 8 "
     "into 0.512 x 0.249 m, box 3 0.311 m long: centres 29-122 mm off",
     30: f"{LOWER}: boxes 1, 2 and 3 0.056 m for 0.150, from box 4 (0.094 m); box 9 0.033 m for "
@@ -102,8 +100,6 @@ XFAIL_TAPED = {
     "0.071 m, 1 false)",
     (8, "none"): f"{TAPE}: boxes 1 and 7 as flaps 0.054-0.126 m wide (3 false), box 7's 0.077 m "
     "tall for 0.200",
-    (21, "none"): f"{SHADE}: box 4 missed, joined with box 2 (a carton on it) into a 0.405 x "
-    "0.304 m top, a platform; box 5 0.305 x 0.219 m, centre 7.0 mm off (bound 5)",
     (30, "none"): f"{LOWER}: boxes 1, 2 and 3 0.056 m for 0.150, from box 4 (0.094 m); box 9 "
     f"0.033 m for 0.183, from the 0.150 m tops beside it; {BASE}: box 8 0.015 m for 0.150, its "
     "base 135 mm above the pallet",
@@ -124,8 +120,7 @@ XFAIL_TAPED_FLAPS = {
 
 XFAIL_TAPED_SCRAPS = {
     (20, "none"): f"{TAPE}: boxes 6 and 7 missed, cut into 0.073 m flaps across two cartons "
-    f"(0.604 and 0.603 m long, false) and 0.26 m wide pieces; {TWICE}: box 10 (0.303 x 0.121 "
-    f"and 0.302 x 0.086 m, 1 false); {PALLET}: 0.372 x 0.258 x 0.144 m",
+    f"(0.604 and 0.603 m long, false); {PALLET}: 0.372 x 0.258 x 0.144 m",
     (38, "d435"): f"{TAPE}: flaps 0.043-0.120 m wide, two across two cartons (0.61 m long), 5 "
     f"false; {PLATFORM}: box 8 (0.174 m), and the cartons beside it 0.026 m for 0.200 from it; "
     "3 missed",
@@ -202,7 +197,6 @@ def test_random_scene_every_box_right(seed):
     assert max(judged.height_mm + judged.hidden_height_mm) <= 2.0, judged.notes
 
 
-@xfail(f"{TWICE}: box 6, either side of box 7 on it (0.228 x 0.064 and 0.228 x 0.120 m, 1 false)")
 def test_a_box_flush_on_a_narrow_one_beside_a_lower_top_stands_on_the_narrow_one():
     """Seed 2: a carton 57 x 20 mm stands on one of 63 x 22 mm, their faces nearly flush, and
     the colour steps down the faces where the lower one begins. A wide top 4 mm higher than

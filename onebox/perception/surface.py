@@ -78,6 +78,9 @@ class Surface:
     """Height per metre of depth along each pixel's ray (height = depth * slope + offset)."""
     reach_px: int
     """How many pixels either side the normals were taken across (edges blur this far)."""
+    quiet: BoolArray
+    """The noise is under ``QUIET_SHARE`` of the pixel's footprint: a surface a few pixels
+    wide is still seen for what it is."""
 
 
 @functools.lru_cache(maxsize=8)
@@ -181,7 +184,7 @@ def read_surface(depth_m: Float32Array, lens: Intrinsics, support: Support) -> S
             limits,
         )
         step &= cv2.dilate(near, square) > 0
-    return Surface(height, sigma, up, step, slope, reach)
+    return Surface(height, sigma, up, step, slope, reach, quiet)
 
 
 def lumpy(support: Support) -> bool:

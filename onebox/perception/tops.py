@@ -11,7 +11,9 @@ How:
 
 1. **Standing pixels facing up**: higher than ``min_height_m`` and 4 sigma(z) above the
    support, facing up (:mod:`onebox.perception.surface`), not on a depth step. An opening
-   (3 x 3) takes off single pixels and spurs a pixel wide (flying pixels, stereo streaks).
+   (3 x 3) takes off single pixels and spurs two pixels wide (flying pixels, stereo streaks);
+   where the depth is quiet, only spurs a pixel wide (2 x 2): a narrow top seen from far,
+   slanting across the rows, is two or three pixels wide.
 2. **Connected regions** of them (4-connected, OpenCV), the pixels cut at steps or whose
    normals the smoothing turned grown back into the region beside them when at its height
    (:func:`onebox.perception.kernels.grow`, a few pixels).
@@ -145,6 +147,11 @@ def standing_regions(surface: Surface, min_height_m: float, max_height_m: float 
         np.inf if max_height_m is None else max_height_m,
     )
     opened = cv2.morphologyEx(core, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+    if surface.quiet.any():
+        # Where the depth is quiet a pixel-wide spur is still a stray, but a top two or three
+        # pixels wide (a narrow box seen from far, slanting across the rows) is no streak.
+        thin = cv2.morphologyEx(core, cv2.MORPH_OPEN, np.ones((2, 2), np.uint8))
+        opened |= thin & surface.quiet.view(np.uint8)
     _, found = cv2.connectedComponents(opened, connectivity=4, ltype=cv2.CV_32S)
     labels: IntArray = np.asarray(found, dtype=np.int32)
     # Grow the regions back over the pixels cut at steps and the edge pixels whose normal the
