@@ -47,35 +47,6 @@ def extents(label: IntArray, p: Float64Array, q: Float64Array, count: int) -> Fl
 
 
 @numba.njit(cache=True, nogil=True)
-def _extremes_3x3(values: IntArray) -> tuple[IntArray, IntArray]:
-    """The largest and smallest value in each pixel's 3 x 3 neighbourhood (within the
-    picture): a pass along the rows, then one down the columns."""
-    rows, cols = values.shape
-    row_high = values.copy()
-    row_low = values.copy()
-    for r in range(rows):
-        for c in range(cols - 1):
-            right = values[r, c + 1]
-            row_high[r, c] = max(row_high[r, c], right)
-            row_low[r, c] = min(row_low[r, c], right)
-        for c in range(1, cols):
-            left = values[r, c - 1]
-            row_high[r, c] = max(row_high[r, c], left)
-            row_low[r, c] = min(row_low[r, c], left)
-    high = row_high.copy()
-    low = row_low.copy()
-    for r in range(rows - 1):
-        for c in range(cols):
-            high[r, c] = max(high[r, c], row_high[r + 1, c])
-            low[r, c] = min(low[r, c], row_low[r + 1, c])
-    for r in range(1, rows):
-        for c in range(cols):
-            high[r, c] = max(high[r, c], row_high[r - 1, c])
-            low[r, c] = min(low[r, c], row_low[r - 1, c])
-    return high, low
-
-
-@numba.njit(cache=True, nogil=True)
 def grow(
     labels: npt.NDArray[np.int32],
     height: npt.NDArray[np.float32],
@@ -968,8 +939,6 @@ def top_points(
     edge = np.zeros(count, dtype=np.bool_)
     ray_x = np.empty(count)
     ray_y = np.empty(count)
-    # On the outline: another label (or none) among the 8 neighbours.
-    high, low = _extremes_3x3(labels)
     at = start[:n].copy()
     for r in range(rows):
         for c in range(cols):
@@ -988,7 +957,11 @@ def top_points(
             h[i] = height[r, c]
             z[i] = zi
             noise[i] = sigma[r, c]
-            edge[i] = high[r, c] != label or low[r, c] != label
+            # On the outline: another label (or none) among the 8 neighbours in the picture.
+            for nr in range(max(r - 1, 0), min(r + 2, rows)):
+                for nc in range(max(c - 1, 0), min(c + 2, cols)):
+                    if labels[nr, nc] != label:
+                        edge[i] = True
             ray_x[i] = across[c]
             ray_y[i] = down[r]
     return start, index, top, a, b, h, z, noise, edge, ray_x, ray_y
