@@ -34,7 +34,10 @@ Float64Array = npt.NDArray[np.float64]
 
 SEAM_WIDTH_M = 0.006
 """The widest gap between two touching cartons that reads as a thin line (wider is a gap the
-depth sees)."""
+depth sees)..."""
+SEAM_MIN_PX = 5
+"""...looked for across this many pixels at least: however thin, a line slanting across the
+pixel grid darkens two or three pixels side by side, none of them fully."""
 DARK_STEP = 25.0
 """A line this many grey levels darker than both sides is dark; never less than 4 x the
 picture's own noise."""
@@ -66,7 +69,7 @@ def seam_map(
     sample = depth_m[:: max(1, depth_m.shape[0] // 32), :: max(1, depth_m.shape[1] // 32)]
     finite = sample[np.isfinite(sample)]
     distance = float(np.median(finite)) if finite.size else 1.0
-    size = int(np.clip(round(SEAM_WIDTH_M * lens.fx / max(distance, 0.1)), 3, 9)) | 1
+    size = int(np.clip(round(SEAM_WIDTH_M * lens.fx / max(distance, 0.1)), SEAM_MIN_PX, 9)) | 1
     kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (size, size))
     dark = np.asarray(cv2.morphologyEx(grey, cv2.MORPH_BLACKHAT, kernel), dtype=np.uint8)
     # The picture's own noise: the median absolute Laplacian (mostly flat regions).
