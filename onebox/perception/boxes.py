@@ -25,7 +25,7 @@ The pipeline, one module a physical effect:
      much of its rectangle is not seen;
    - which tops are boxes (:func:`_boxes`): large enough, level, flat, not curved over their
      middle half beyond its fitted sag's noise, filling their rectangle and its corners (of
-     what is seen), not cut off, not falling away on more than two sides past which no face of
+     what is seen, and a fifth of the rectangle at least), not cut off, not falling away on more than two sides past which no face of
      their own is seen going down;
    - what each top stands on (:func:`_bases`): the support or a lower top, looked for at its
      own height just past the top's sides, within where the top's faces are seen to end
@@ -109,6 +109,9 @@ SAG_SPREAD = 3.35
 sigma * 3.35 / sqrt(N)..."""
 SAG_FLOOR = 0.35
 """...but a top's fitted sag is never taken as surer than this share of sigma(z)."""
+MIN_SEEN = 0.2
+"""A top fills this share of its rectangle at least, however much of it is hidden: a sliver
+seen between nearer things says too little of the rectangle round it."""
 CORNER_FILL = 0.6
 """A box's top reaches into its rectangle's corners; a disc, a rounded tin or a bowl's bottom
 does not."""
@@ -462,7 +465,7 @@ def _boxes(
 ) -> BoolArray:
     """Which tops are boxes' (see the module docstring)."""
     # What something nearer hides cannot be filled: ask for the rest.
-    fill_needed = settings.min_score * (1.0 - round_.covered)
+    fill_needed = np.maximum(settings.min_score * (1.0 - round_.covered), MIN_SEEN)
     corners_needed = CORNER_FILL * (1.0 - round_.corners_covered)
     flat = tops.rms_m <= np.maximum(FLAT_SIGMAS * tops.sigma_m, FLAT_M)
     # The sag is fitted to the middle half's pixels: its noise falls with the root of how
