@@ -542,8 +542,10 @@ def _hollow(
 ) -> BoolArray:
     """Whether nothing is under a top's edges where a box's sides would be, as under a table
     on legs or a board on a post: on every side whose face the camera sees, points on the
-    side's plane in the upper quarter between the base and the top are mostly seen farther
-    than they lie. A top none of whose faces the camera sees is not hollow."""
+    side's plane in the upper quarter between the base and the top are seen farther than they
+    lie, three in four at least (a stereo camera reads a face it sees at a grazing angle
+    through its background, here and there). A top none of whose faces the camera sees is
+    not hollow."""
     n = len(tops)
     share = np.array([0.75, 0.9])
     heights = base_m[:, None] + share[None, :] * (tops.height_m - base_m)[:, None]
@@ -551,7 +553,7 @@ def _hollow(
     tolerance = np.maximum(4.0 * tops.sigma_m, WALL_TOLERANCE_M)[:, None, None, None]
     with np.errstate(invalid="ignore"):
         farther = (seen > z_expected + tolerance) & inside
-    empty = farther.reshape(n, 4, -1).mean(axis=2) >= 0.5
+    empty = farther.reshape(n, 4, -1).mean(axis=2) >= 0.75
     result: BoolArray = looked.any(axis=1) & (empty | ~looked).all(axis=1)
     return result
 
