@@ -80,6 +80,9 @@ WALL_FACING = 0.1
 """A side faces the camera when its outward normal is this far (cosine) toward it."""
 WALL_TOLERANCE_M = 0.012
 """A point on a side seen this much farther than it lies (or 4 sigma(z)) has nothing there."""
+HOLLOW_INSET_PX = 2.0
+"""Under a top's edges is looked at this many pixels in from its rectangle: a smeared edge
+stretches the rectangle past the faces under it."""
 PLATFORM_CARRIES = 2
 """A platform carries at least this many boxes..."""
 PLATFORM_COVERED = 0.5
@@ -494,9 +497,10 @@ def _on_sides(
     depth_m: Float32Array,
     lens: Intrinsics,
     support: Support,
+    inset_px: float = 1.0,
 ) -> tuple[Float64Array, Float64Array, BoolArray, tuple[npt.NDArray[np.intp], ...]]:
-    """Points on the planes of each top's four sides (a pixel in from the rectangle, over the
-    middle 60 % of each side) at the heights ``height_m`` (n, H): the depth each would read
+    """Points on the planes of each top's four sides (``inset_px`` pixels in from the
+    rectangle, over the middle 60 % of each side) at the heights ``height_m`` (n, H): the depth each would read
     if seen, the depth seen there, whether it is in the picture, and its pixel (row, column);
     each (n, 4, H, 5)."""
     z_expected, seen, inside, vi, ui = kernels.probe_faces(
@@ -504,7 +508,7 @@ def _on_sides(
         tops.axis_ab,
         tops.length_m,
         tops.width_m,
-        tops.depth_m / lens.fx,
+        inset_px * tops.depth_m / lens.fx,
         _FACE_SPREAD,
         np.ascontiguousarray(height_m, dtype=np.float64),
         tops.basis,
@@ -549,7 +553,7 @@ def _hollow(
     n = len(tops)
     share = np.array([0.75, 0.9])
     heights = base_m[:, None] + share[None, :] * (tops.height_m - base_m)[:, None]
-    z_expected, seen, inside, _ = _on_sides(tops, heights, depth_m, lens, support)
+    z_expected, seen, inside, _ = _on_sides(tops, heights, depth_m, lens, support, HOLLOW_INSET_PX)
     tolerance = np.maximum(4.0 * tops.sigma_m, WALL_TOLERANCE_M)[:, None, None, None]
     with np.errstate(invalid="ignore"):
         farther = (seen > z_expected + tolerance) & inside
