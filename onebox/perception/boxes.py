@@ -25,7 +25,8 @@ The pipeline, one module a physical effect:
      much of its rectangle is not seen;
    - which tops are boxes (:func:`_boxes`): large enough, level, flat, not curved over their
      middle half beyond its fitted sag's noise, filling their rectangle and its corners (of
-     what is seen, and a fifth of the rectangle at least), not cut off, not falling away on more than two sides past which no face of
+     what is seen, and a fifth of the rectangle at least; more than fill it is a surface
+     folding over itself), not cut off, not falling away on more than two sides past which no face of
      their own is seen going down;
    - what each top stands on (:func:`_bases`): the support or a lower top, looked for at its
      own height just past the top's sides, within where the top's faces are seen to end
@@ -112,6 +113,9 @@ SAG_SPREAD = 3.35
 sigma * 3.35 / sqrt(N)..."""
 SAG_FLOOR = 0.35
 """...but a top's fitted sag is never taken as surer than this share of sigma(z)."""
+MAX_FILL = 1.15
+"""A flat top's pixels, laid on its plane, fit in its rectangle; more of them than it has
+room for is a surface folding over itself (a cup's rim with its walls inside and out)."""
 MIN_SEEN = 0.2
 """A top fills this share of its rectangle at least, however much of it is hidden: a sliver
 seen between nearer things says too little of the rectangle round it."""
@@ -482,6 +486,7 @@ def _boxes(
         & (tops.tilt_deg <= settings.max_top_tilt_deg)
         & flat
         & (tops.fill >= fill_needed)
+        & (tops.fill <= MAX_FILL)
         & (tops.corners >= corners_needed)
         & ((round_.sloping & ~faces).sum(axis=1) <= 2)
         & ~((tops.sag_share > CURVED_SHARE) & (tops.sag_m > CURVED_SIGMAS * sag_noise))
