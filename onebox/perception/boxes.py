@@ -26,8 +26,8 @@ The pipeline, one module a physical effect:
    - which tops are boxes (:func:`_boxes`): large enough, level, flat, not curved over their
      middle half beyond its fitted sag's noise, filling their rectangle and its corners (of
      what is seen, and a fifth of the rectangle at least; more than fill it is a surface
-     folding over itself), not cut off, not falling away on more than two sides past which no face of
-     their own is seen going down;
+     folding over itself), not cut off, not falling away on more than two sides past which
+     no face of their own is seen going down;
    - what each top stands on (:func:`_bases`): the support or a lower top, looked for at its
      own height just past the top's sides, within where the top's faces are seen to end
      (:func:`_face_bottom`), or where they end on a box sticking out under them;
@@ -505,9 +505,9 @@ def _on_sides(
     inset_px: float = 1.0,
 ) -> tuple[Float64Array, Float64Array, BoolArray, tuple[npt.NDArray[np.intp], ...]]:
     """Points on the planes of each top's four sides (``inset_px`` pixels in from the
-    rectangle, over the middle 60 % of each side) at the heights ``height_m`` (n, H): the depth each would read
-    if seen, the depth seen there, whether it is in the picture, and its pixel (row, column);
-    each (n, 4, H, 5)."""
+    rectangle, over the middle 60 % of each side) at the heights ``height_m`` (n, H): the depth
+    each would read if seen, the depth seen there, whether it is in the picture, and its pixel
+    (row, column); each (n, 4, H, 5)."""
     z_expected, seen, inside, vi, ui = kernels.probe_faces(
         tops.middle_ab,
         tops.axis_ab,
