@@ -426,7 +426,8 @@ def seam_cuts(
     print, end share, shade step) say so and it is not one edge of a strip of tape (its mirror
     about the middle also a seam, the strip between them in a shade of ``grey`` its own, the
     flaps either side alike)."""
-    min_part, min_seam, seam_share, over_print, end_share, shade_step = limits
+    min_part, min_seam, seam_share, over_print, end_share, shade_step = limits[:6]
+    narrowest_strip, widest_strip = limits[6], limits[7]
     n = len(length)
     count = len(top)
     on_seam = np.empty(count)
@@ -528,6 +529,25 @@ def seam_cuts(
                 and abs(above - below) < shade_step
                 and abs(middle - 0.5 * (above + below)) >= shade_step
             )
+            # ... or one edge of a strip of its own shade anywhere, no wider than a roll of
+            # tape, with alike flaps either side (a band as wide as the strip).
+            reach = math.ceil(widest_strip / step[k])
+            for other in range(max(s - reach, first), min(s + reach, last) + 1):
+                if tape:
+                    break
+                if abs(other - s) * step[k] < narrowest_strip or not strong[other]:
+                    continue
+                low, high = min(s, other), max(s, other)
+                wide = high - low
+                if low - wide < first or high + wide > last:
+                    continue
+                strip = _mean_run(run_count, run_sum, first, low + 1, high - 1)
+                before = _mean_run(run_count, run_sum, first, low - wide, low - 1)
+                after = _mean_run(run_count, run_sum, first, high + 1, high + wide)
+                tape = (
+                    abs(after - before) < shade_step
+                    and abs(strip - 0.5 * (after + before)) >= shade_step
+                )
             # The strongest slot of each top (the last among equals).
             if not tape and share[s] >= peak[k]:
                 peak[k] = share[s]

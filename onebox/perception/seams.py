@@ -56,6 +56,11 @@ END_SHARE = 0.5
 printed lines stop at a margin."""
 SHADE_STEP = 12.0
 """Two parts of a top whose mean grey levels differ by this much are in shades of their own."""
+NARROWEST_STRIP_M = 0.02
+WIDEST_STRIP_M = 0.08
+"""A strip of its own shade between two lines, wider than this first (a seam's dark line has
+two sides too) and no wider than this, with alike flaps either side, is tape or a printed
+band (packing tape is 48 or 75 mm wide), not two seams..."""
 MIN_PART_M = 0.04
 """A seam leaves at least this much of the top either side: the narrowest carton."""
 
@@ -100,7 +105,18 @@ def split_at_seams(tops: Tops, seam: BoolArray, grey: npt.NDArray[np.uint8]) -> 
     index, top = tops.points.index, tops.points.top
     if index.size == 0:
         return None
-    limits = np.array([MIN_PART_M, MIN_SEAM_M, SEAM_SHARE, SEAM_OVER_PRINT, END_SHARE, SHADE_STEP])
+    limits = np.array(
+        [
+            MIN_PART_M,
+            MIN_SEAM_M,
+            SEAM_SHARE,
+            SEAM_OVER_PRINT,
+            END_SHARE,
+            SHADE_STEP,
+            NARROWEST_STRIP_M,
+            WIDEST_STRIP_M,
+        ]
+    )
     cut_top, cut_along, cut_at = kernels.seam_cuts(
         index,
         top,
