@@ -396,6 +396,8 @@ def _mean_run(
     return float((run_sum[upto] - before_sum) / max(run_count[upto] - before_count, 1.0))
 
 
+SEAM_AROUND = (4, 10)
+"""Slots (pixels) either side of a seam whose print it is compared with: from, to."""
 SEAM_FULL = 0.5
 """A seam's cross-section holds at least this share of the top's typical one."""
 
@@ -482,12 +484,23 @@ def seam_cuts(
                 row[4] += 1.0
                 row[5] += on_seam[i]
             row[6] += shade[i]
-        strong = np.zeros(total, dtype=np.bool_)
         share = np.zeros(total)
+        for s in range(total):
+            share[s] = sums[s, 1] / max(sums[s, 0], 1.0)
+        strong = np.zeros(total, dtype=np.bool_)
         position = np.empty(total)
         for s in range(total):
             k = owner[s]
-            share[s] = sums[s, 1] / max(sums[s, 0], 1.0)
+            # The print round the line: its share in the slots a few pixels either side (a
+            # seam stands out from them; a busy print's lines do not).
+            first, last = offset[k], offset[k + 1] - 1
+            around = 0.0
+            counted = 0
+            for other in range(s - SEAM_AROUND[1], s + SEAM_AROUND[1] + 1):
+                if first <= other <= last and abs(other - s) >= SEAM_AROUND[0]:
+                    around += share[other]
+                    counted += 1
+            around /= max(counted, 1)
             position[s] = (s - offset[k] - 0.5) * step[k] - 0.5 * extent[k]
             margin = max(min_part, 3.0 * step[k])
             # A seam runs across the whole top: its cross-section is no thinner than half a
@@ -500,6 +513,7 @@ def seam_cuts(
                 and span[k] >= min_seam
                 and share[s] >= seam_share
                 and share[s] - print_share[k] >= over_print
+                and share[s] - around >= over_print
                 and sums[s, 3] / max(sums[s, 2], 1.0) >= end_share
                 and sums[s, 5] / max(sums[s, 4], 1.0) >= end_share
             )

@@ -38,7 +38,7 @@ depth sees)..."""
 SEAM_MIN_PX = 5
 """...looked for across this many pixels at least: however thin, a line slanting across the
 pixel grid darkens two or three pixels side by side, none of them fully."""
-DARK_STEP = 25.0
+DARK_STEP = 20.0
 """A line this many grey levels darker than both sides is dark; never less than 4 x the
 picture's own noise."""
 EDGE_STEP = 30.0
@@ -47,7 +47,8 @@ never less than 6 x the picture's noise."""
 SEAM_SHARE = 0.8
 """A seam crosses this share of a top's cross-section..."""
 SEAM_OVER_PRINT = 0.35
-"""...and this much more than the top's cross-sections do on average (print, texture)."""
+"""...and this much more than the top's cross-sections do on average, and than those a few
+pixels either side of it (print, texture: a busy print's lines stand out from neither)."""
 MIN_SEAM_M = 0.1
 """A seam is at least this long (the side two cartons share): a printed line across a narrow
 top is not one."""
