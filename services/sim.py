@@ -386,7 +386,9 @@ def publish_capture(
             clean = capture.depth_m
         colour = pictures.rgb8_image(cam.noise.colour(capture.rgb), header)
         depth = pictures.depth_image(cam.noise.apply(capture.depth_m), header, depth_encoding)
-        cam.depth.publish(depth)
+        # The depth picture last: whoever pairs the two has the colour by the time the depth
+        # picture, which it waits on, comes.
         cam.colour.publish(colour)
+        cam.depth.publish(depth)
     assert clean is not None
     return clean
