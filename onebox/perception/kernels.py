@@ -1209,7 +1209,7 @@ def keep_freed_memory() -> bool:
     Whether it took (False where the C library is not glibc)."""
     try:
         mallopt = ctypes.CDLL(None).mallopt
-    except (OSError, AttributeError):
+    except (OSError, AttributeError, TypeError):  # no C library to name, or not glibc's
         return False
     m_trim_threshold, m_mmap_threshold = -1, -3
     return bool(mallopt(m_mmap_threshold, MALLOC_MMAP_THRESHOLD_B)) and bool(
