@@ -711,21 +711,46 @@ def settled_steps(
     wrapping round at its edges, as ``np.roll`` does); float32 as NumPy computes it.
     ``limits`` as for :func:`surface_heights`."""
     rows, cols = height.shape
-    step_sigmas, min_step = limits[2], limits[3]
     near = np.zeros((rows, cols), dtype=np.uint8)
+    if cols == 0:
+        return near
     for r in range(rows):
         up = r - 1 if r > 0 else rows - 1
         down = r + 1 if r < rows - 1 else 0
-        for c in range(cols):
-            bound = step_sigmas * sigma[r, c]
-            threshold = bound if (bound != bound or bound > min_step) else min_step
-            h = height[r, c]
+        # The first and last columns wrap round; the rest read their neighbours straight (a
+        # loop without branches, which the compiler vectorises).
+        for c in (0, cols - 1):
             left = c - 1 if c > 0 else cols - 1
             right = c + 1 if c < cols - 1 else 0
-            across = (h < height[r, left] - threshold) & (h < height[r, right] - threshold)
-            along = (h < height[up, c] - threshold) & (h < height[down, c] - threshold)
-            near[r, c] = across | along | (high[r, c] - low[r, c] > threshold)
+            near[r, c] = _settled(height, sigma, high, low, r, c, up, down, left, right, limits)
+        for c in range(1, cols - 1):
+            near[r, c] = _settled(height, sigma, high, low, r, c, up, down, c - 1, c + 1, limits)
     return near
+
+
+@numba.njit(cache=True, nogil=True)
+def _settled(
+    height: Float32Array,
+    sigma: Float32Array,
+    high: Float32Array,
+    low: Float32Array,
+    r: int,
+    c: int,
+    up: int,
+    down: int,
+    left: int,
+    right: int,
+    limits: Float32Array,
+) -> np.uint8:
+    """:func:`settled_steps` at pixel (r, c), its neighbours in rows ``up`` and ``down`` and
+    columns ``left`` and ``right``."""
+    bound = limits[2] * sigma[r, c]
+    min_step = limits[3]
+    threshold = bound if (bound != bound or bound > min_step) else min_step
+    h = height[r, c]
+    across = (h < height[r, left] - threshold) & (h < height[r, right] - threshold)
+    along = (h < height[up, c] - threshold) & (h < height[down, c] - threshold)
+    return np.uint8(across | along | (high[r, c] - low[r, c] > threshold))
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
