@@ -1018,11 +1018,24 @@ def top_points(
             h[i] = height[r, c]
             z[i] = zi
             noise[i] = sigma[r, c]
-            # On the outline: another label (or none) among the 8 neighbours in the picture.
-            for nr in range(max(r - 1, 0), min(r + 2, rows)):
-                for nc in range(max(c - 1, 0), min(c + 2, cols)):
-                    if labels[nr, nc] != label:
-                        edge[i] = True
+            # On the outline: another label (or none) among the 8 neighbours in the picture
+            # (inside the picture's frame, the 8 read straight).
+            if 0 < r < rows - 1 and 0 < c < cols - 1:
+                edge[i] = (
+                    (labels[r - 1, c - 1] != label)
+                    | (labels[r - 1, c] != label)
+                    | (labels[r - 1, c + 1] != label)
+                    | (labels[r, c - 1] != label)
+                    | (labels[r, c + 1] != label)
+                    | (labels[r + 1, c - 1] != label)
+                    | (labels[r + 1, c] != label)
+                    | (labels[r + 1, c + 1] != label)
+                )
+            else:
+                for nr in range(max(r - 1, 0), min(r + 2, rows)):
+                    for nc in range(max(c - 1, 0), min(c + 2, cols)):
+                        if labels[nr, nc] != label:
+                            edge[i] = True
             ray_x[i] = across[c]
             ray_y[i] = down[r]
     return start, index, top, a, b, h, z, noise, edge, ray_x, ray_y
