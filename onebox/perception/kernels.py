@@ -115,55 +115,85 @@ def rectangle_angles(
     them (the first smallest wins; the first tried if none has an area)."""
     n = len(start) - 1
     best = np.zeros(n)
+    most = max(len(angles), len(fine_angles))
+    cos, sin = np.empty(most), np.empty(most)
+    low_p, high_p = np.empty(most), np.empty(most)
+    low_q, high_q = np.empty(most), np.empty(most)
     for k in range(n):
         for search in range(2):
             tried = angles if search == 0 else best[k] + fine_angles
+            count = len(tried)
+            for j in range(count):
+                cos[j] = np.cos(tried[j])
+                sin[j] = np.sin(tried[j])
+                low_p[j], high_p[j], low_q[j], high_q[j] = np.inf, -np.inf, np.inf, -np.inf
+            # Every angle's rectangle in one pass over the points (each angle's own min and
+            # max still taken over them in order).
+            for i in range(start[k], start[k + 1]):
+                ai, bi = a[i], b[i]
+                for j in range(count):
+                    p = ai * cos[j] + bi * sin[j]
+                    q = bi * cos[j] - ai * sin[j]
+                    low_p[j] = min(low_p[j], p)
+                    high_p[j] = max(high_p[j], p)
+                    low_q[j] = min(low_q[j], q)
+                    high_q[j] = max(high_q[j], q)
             smallest = np.inf
             at = tried[0]
-            for angle in tried:
-                cos = np.cos(angle)
-                sin = np.sin(angle)
-                low_p, high_p, low_q, high_q = np.inf, -np.inf, np.inf, -np.inf
-                for i in range(start[k], start[k + 1]):
-                    p = a[i] * cos + b[i] * sin
-                    q = b[i] * cos - a[i] * sin
-                    low_p = min(low_p, p)
-                    high_p = max(high_p, p)
-                    low_q = min(low_q, q)
-                    high_q = max(high_q, q)
-                area = (high_p - low_p) * (high_q - low_q)
+            for j in range(count):
+                area = (high_p[j] - low_p[j]) * (high_q[j] - low_q[j])
                 if np.isfinite(area) and area < smallest:
                     smallest = area
-                    at = angle
+                    at = tried[j]
             best[k] = at
     return best
 
 
 @numba.njit(cache=True, nogil=True)
 def _profile_keep(
-    coordinate: Float64Array, lo: int, hi: int, step: float, share: float
+    p: Float64Array,
+    q: Float64Array,
+    lo: int,
+    hi: int,
+    step: float,
+    share: float,
+    start_p: float,
+    end_p: float,
+    start_q: float,
+    end_q: float,
 ) -> npt.NDArray[np.bool_]:
-    """Whether each of one top's pixels (``lo`` to ``hi``) has a cross-section along
-    ``coordinate`` (bins ``step`` wide from the top's least coordinate) holding at least
-    ``share`` of the top's typical one (its pixels over its cross-sections that hold any)."""
-    start, end = np.inf, -np.inf
+    """Whether each of one top's pixels (``lo`` to ``hi``) has cross-sections along ``p`` and
+    along ``q`` (bins ``step`` wide from the top's least coordinate, ``start_p`` and
+    ``start_q``; ``end_p`` and ``end_q`` the greatest, +-inf if none) each holding at least
+    ``share`` of the top's typical one along that axis (its pixels over its cross-sections
+    that hold any). The two axes are counted in the same passes, each on its own."""
+    width_p = int(np.floor((end_p - start_p) / step)) + 1 if np.isfinite(end_p) else 0
+    width_q = int(np.floor((end_q - start_q) / step)) + 1 if np.isfinite(end_q) else 0
+    counts_p = np.zeros(width_p, dtype=np.int64)
+    counts_q = np.zeros(width_q, dtype=np.int64)
+    slot_p = np.empty(hi - lo, dtype=np.int64)
+    slot_q = np.empty(hi - lo, dtype=np.int64)
+    # The slots first (a loop the compiler vectorises), then the counts.
     for i in range(lo, hi):
-        start = min(start, coordinate[i])
-        end = max(end, coordinate[i])
-    width = int(np.floor((end - start) / step)) + 1 if np.isfinite(end) else 0
-    counts = np.zeros(width, dtype=np.int64)
-    slot = np.empty(hi - lo, dtype=np.int64)
-    for i in range(lo, hi):
-        slot[i - lo] = int(np.floor((coordinate[i] - start) / step))
-        counts[slot[i - lo]] += 1
-    occupied = 0
-    for s in range(width):
-        if counts[s] > 0:
-            occupied += 1
-    typical = (hi - lo) / max(occupied, 1)
+        slot_p[i - lo] = int(np.floor((p[i] - start_p) / step))
+        slot_q[i - lo] = int(np.floor((q[i] - start_q) / step))
+    for i in range(hi - lo):
+        counts_p[slot_p[i]] += 1
+        counts_q[slot_q[i]] += 1
+    occupied_p = occupied_q = 0
+    for s in range(width_p):
+        if counts_p[s] > 0:
+            occupied_p += 1
+    for s in range(width_q):
+        if counts_q[s] > 0:
+            occupied_q += 1
+    typical_p = (hi - lo) / max(occupied_p, 1)
+    typical_q = (hi - lo) / max(occupied_q, 1)
     keep = np.empty(hi - lo, dtype=np.bool_)
     for i in range(hi - lo):
-        keep[i] = counts[slot[i]] >= share * typical
+        keep[i] = (counts_p[slot_p[i]] >= share * typical_p) & (
+            counts_q[slot_q[i]] >= share * typical_q
+        )
     return keep
 
 
@@ -264,17 +294,17 @@ def measure_tops(
         if det > 1e-18:
             alpha = (sah * sbb - sbh * sab) / det
             beta = (sbh * saa - sah * sab) / det
-        squared = 0.0
+        cos, sin = np.cos(angle[k]), np.sin(angle[k])
+        # Each pixel's residual off the plane; its coordinates along the rectangle's axes
+        # (and their least and greatest); its footprint on the support plane: z^2 / (fx fy
+        # |m . ray|) on the top's own plane (normal m ~ n - alpha e1 - beta e2), times m . n
+        # to lay it on the support's. One pass, each sum in order.
+        squared = summed = 0.0
+        start_p, end_p, start_q, end_q = np.inf, -np.inf, np.inf, -np.inf
         for i in range(lo, hi):
             da, db, dh = a[i] - mean_a, b[i] - mean_b, h[i] - mean_h
             residual[i] = dh - alpha * da - beta * db
             squared += residual[i] * residual[i]
-        rms[k] = np.sqrt(squared / safe)
-        cos, sin = np.cos(angle[k]), np.sin(angle[k])
-        # Each pixel's footprint on the support plane: z^2 / (fx fy |m . ray|) on the top's
-        # own plane (normal m ~ n - alpha e1 - beta e2), times m . n to lay it on the support's.
-        summed = 0.0
-        for i in range(lo, hi):
             p[i] = a[i] * cos + b[i] * sin
             q[i] = b[i] * cos - a[i] * sin
             along_e1 = ray_x[i] * basis[0, 0] + ray_y[i] * basis[0, 1] + basis[0, 2]
@@ -283,11 +313,15 @@ def measure_tops(
             facing = along_n - alpha * along_e1 - beta * along_e2
             footprint[i] = z[i] * z[i] / (fx_fy * max(abs(facing), 0.05))
             summed += footprint[i]
+            start_p = min(start_p, p[i])
+            end_p = max(end_p, p[i])
+            start_q = min(start_q, q[i])
+            end_q = max(end_q, q[i])
+        rms[k] = np.sqrt(squared / safe)
         step = np.sqrt(summed / safe)  # one pixel's side on the plane
         # The extent along each axis over the pixels whose cross-sections are not strays
         # (all of them if none is kept).
-        keep = _profile_keep(p, lo, hi, step, profile_share)
-        keep &= _profile_keep(q, lo, hi, step, profile_share)
+        keep = _profile_keep(p, q, lo, hi, step, profile_share, start_p, end_p, start_q, end_q)
         if not keep.any():
             keep[:] = True
         low_p, high_p, low_q, high_q = np.inf, -np.inf, np.inf, -np.inf
@@ -321,27 +355,44 @@ def measure_tops(
         stretched_q = extent_q * math.hypot(1.0, beta * cos - alpha * sin)
         # How the top curves off its plane along each axis: the residuals' quadratic part over
         # the middle half of the top, as the sag from its middle to that half's edges.
+        # (Both axes in the same passes, each with its own sums in order.)
+        quarter_p, quarter_q = stretched_p / 4, stretched_q / 4
+        count_p = inner_square_p = inner_residual_p = 0.0
+        count_q = inner_square_q = inner_residual_q = 0.0
+        for i in range(lo, hi):
+            offset_p = p[i] - mid_p
+            offset_q = q[i] - mid_q
+            if abs(offset_p) < quarter_p:
+                count_p += 1.0
+                inner_square_p += offset_p * offset_p
+                inner_residual_p += residual[i]
+            if abs(offset_q) < quarter_q:
+                count_q += 1.0
+                inner_square_q += offset_q * offset_q
+                inner_residual_q += residual[i]
+        count_p = max(count_p, 1.0)
+        count_q = max(count_q, 1.0)
+        inner_square_p /= count_p
+        inner_residual_p /= count_p
+        inner_square_q /= count_q
+        inner_residual_q /= count_q
+        spread_p = curved_p = spread_q = curved_q = 0.0
+        for i in range(lo, hi):
+            offset_p = p[i] - mid_p
+            offset_q = q[i] - mid_q
+            if abs(offset_p) < quarter_p:
+                centred = offset_p * offset_p - inner_square_p
+                curved_p += centred * (residual[i] - inner_residual_p)
+                spread_p += centred * centred
+            if abs(offset_q) < quarter_q:
+                centred = offset_q * offset_q - inner_square_q
+                curved_q += centred * (residual[i] - inner_residual_q)
+                spread_q += centred * centred
         for direction in range(2):
-            coordinate = p if direction == 0 else q
-            mid = mid_p if direction == 0 else mid_q
             extent = stretched_p if direction == 0 else stretched_q
-            count = inner_square = inner_residual = 0.0
-            for i in range(lo, hi):
-                offset = coordinate[i] - mid
-                if abs(offset) < extent / 4:
-                    count += 1.0
-                    inner_square += offset * offset
-                    inner_residual += residual[i]
-            count = max(count, 1.0)
-            inner_square /= count
-            inner_residual /= count
-            spread = curved = 0.0
-            for i in range(lo, hi):
-                offset = coordinate[i] - mid
-                if abs(offset) < extent / 4:
-                    centred = offset * offset - inner_square
-                    curved += centred * (residual[i] - inner_residual)
-                    spread += centred * centred
+            count = count_p if direction == 0 else count_q
+            curved = curved_p if direction == 0 else curved_q
+            spread = spread_p if direction == 0 else spread_q
             curve = (curved / count) / max(spread / count, 1e-18)
             this = abs(curve) * (extent / 4) ** 2
             share = this / max(extent / 2, 1e-9)
