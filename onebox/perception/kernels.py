@@ -60,25 +60,33 @@ def grow(
     within ``tolerance`` (the open pixel's) of the neighbour's it is reached from, at most
     ``steps`` pixels (8-connected, breadth first)."""
     rows, cols = labels.shape
+    if rows == 0 or cols == 0:
+        return
     # The labelled pixels with an open unlabelled one among their 8 neighbours: "free"
-    # pixels spread a column either way, then looked for a row either way.
+    # pixels spread a column either way, then looked for a row either way (loops without
+    # branches, which the compiler vectorises, but for the list of those pixels).
+    free = np.empty((rows, cols), dtype=np.bool_)
+    for r in range(rows):
+        for c in range(cols):
+            free[r, c] = (labels[r, c] == 0) & open_[r, c]
     free_near = np.empty((rows, cols), dtype=np.bool_)
     for r in range(rows):
-        before, here = False, labels[r, 0] == 0 and open_[r, 0]
-        for c in range(cols):
-            after = c + 1 < cols and labels[r, c + 1] == 0 and open_[r, c + 1]
-            free_near[r, c] = before or here or after
-            before, here = here, after
+        free_near[r, 0] = free[r, 0] | (cols > 1 and free[r, 1])
+        for c in range(1, cols - 1):
+            free_near[r, c] = free[r, c - 1] | free[r, c] | free[r, c + 1]
+        if cols > 1:
+            free_near[r, cols - 1] = free[r, cols - 2] | free[r, cols - 1]
     frontier = np.empty(rows * cols, dtype=np.int64)
+    edge = np.empty(cols, dtype=np.bool_)
     count = 0
     for r in range(rows):
+        above, below = max(r - 1, 0), min(r + 1, rows - 1)
         for c in range(cols):
-            if labels[r, c] == 0:
-                continue
-            edge = False
-            for rr in range(max(r - 1, 0), min(r + 2, rows)):
-                edge |= free_near[rr, c]
-            if edge:
+            edge[c] = (labels[r, c] != 0) & (
+                free_near[above, c] | free_near[r, c] | free_near[below, c]
+            )
+        for c in range(cols):
+            if edge[c]:
                 frontier[count] = r * cols + c
                 count += 1
     following = np.empty(rows * cols, dtype=np.int64)
@@ -88,6 +96,25 @@ def grow(
             r, c = divmod(frontier[i], cols)
             label = labels[r, c]
             h = height[r, c]
+            if 0 < r < rows - 1 and 0 < c < cols - 1:
+                # Inside the picture's frame, the 8 neighbours in the same order, straight.
+                for rr, cc in (
+                    (r - 1, c - 1),
+                    (r - 1, c),
+                    (r - 1, c + 1),
+                    (r, c - 1),
+                    (r, c + 1),
+                    (r + 1, c - 1),
+                    (r + 1, c),
+                    (r + 1, c + 1),
+                ):
+                    if labels[rr, cc] != 0 or not open_[rr, cc]:
+                        continue
+                    if abs(height[rr, cc] - h) < tolerance[rr, cc]:
+                        labels[rr, cc] = label
+                        following[added] = rr * cols + cc
+                        added += 1
+                continue
             for rr in range(max(r - 1, 0), min(r + 2, rows)):
                 for cc in range(max(c - 1, 0), min(c + 2, cols)):
                     if labels[rr, cc] != 0 or not open_[rr, cc]:
