@@ -1060,11 +1060,13 @@ def top_points(
     for r in range(rows):
         for c in range(cols):
             n = max(n, labels[r, c])
-    start = np.zeros(n + 1, dtype=np.intp)
+    # Counted in four tallies, by column (as in drop_small), summed after.
+    tallies = np.zeros((4, n + 1), dtype=np.intp)
     for r in range(rows):
         for c in range(cols):
             if labels[r, c] > 0:
-                start[labels[r, c]] += 1
+                tallies[c & 3, labels[r, c]] += 1
+    start = tallies[0] + tallies[1] + tallies[2] + tallies[3]
     for k in range(n):
         start[k + 1] += start[k]
     count = start[n]
@@ -1163,10 +1165,13 @@ def drop_small(labels: IntArray, min_pixels: int) -> IntArray:
     for r in range(rows):
         for c in range(cols):
             count = max(count, labels[r, c])
-    sizes = np.zeros(count + 1, dtype=np.int64)
+    # Counted in four tallies, by column, summed after: a run of one label does not wait
+    # on its own count from the pixel before.
+    tallies = np.zeros((4, count + 1), dtype=np.int64)
     for r in range(rows):
         for c in range(cols):
-            sizes[labels[r, c]] += 1
+            tallies[c & 3, labels[r, c]] += 1
+    sizes = tallies[0] + tallies[1] + tallies[2] + tallies[3]
     renumber = np.zeros(count + 1, dtype=np.int32)
     kept = 0
     for k in range(1, count + 1):
