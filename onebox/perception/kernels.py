@@ -754,6 +754,40 @@ def faces_up(
 
 
 @numba.njit(cache=True, nogil=True)
+def read_or(values: Float32Array, counted: Float32Array, instead: float) -> Float32Array:
+    """``values`` where there is a reading (``counted`` > 0, from :func:`surface_heights`),
+    ``instead`` (as float32) where not: ``np.where(counted > 0, values, instead)`` in one
+    pass."""
+    rows, cols = values.shape
+    other = np.float32(instead)
+    result = np.empty((rows, cols), dtype=np.float32)
+    for r in range(rows):
+        for c in range(cols):
+            result[r, c] = values[r, c] if counted[r, c] > 0 else other
+    return result
+
+
+@numba.njit(cache=True, nogil=True)
+def merge_flags(
+    into: npt.NDArray[np.bool_], flags: npt.NDArray[np.bool_], where: npt.NDArray[np.bool_]
+) -> None:
+    """``into |= flags & where``, in place, in one pass."""
+    rows, cols = into.shape
+    for r in range(rows):
+        for c in range(cols):
+            into[r, c] |= flags[r, c] & where[r, c]
+
+
+@numba.njit(cache=True, nogil=True)
+def keep_flags(into: npt.NDArray[np.bool_], where: npt.NDArray[np.uint8]) -> None:
+    """``into &= where > 0``, in place, in one pass."""
+    rows, cols = into.shape
+    for r in range(rows):
+        for c in range(cols):
+            into[r, c] &= where[r, c] > 0
+
+
+@numba.njit(cache=True, nogil=True)
 def surface_steps(
     depth: Float32Array,
     sigma: Float32Array,
@@ -1356,6 +1390,9 @@ def warm_up() -> None:
     surface_heights(picture, picture, plane, limits)
     faces_up(picture, picture, picture, 1, lens, plane, limits)
     surface_steps(picture, picture, picture, picture, limits)
+    read_or(picture, picture, 0.0)
+    merge_flags(picture > 0, picture > 0, picture > 0)
+    keep_flags(picture > 0, np.ones((3, 3), dtype=np.uint8))
     settled_steps(picture, picture, picture, picture, limits)
     sight(a, a, a, np.eye(3), 1.0, picture, np.ones(4))
     tops_ab = np.ones((1, 2))

@@ -160,7 +160,7 @@ def read_surface(depth_m: Float32Array, lens: Intrinsics, support: Support) -> S
     # is small against a pixel's footprint, the gradient across one pixel either side is
     # steady enough to say which way it faces.
     if quiet.any():
-        up |= facing(1) & quiet
+        kernels.merge_flags(up, facing(1), quiet)
     # The 3 x 3 spread of heights; no reading counts as neither high nor low.
     square = np.ones((3, 3), np.uint8)
     high = np.asarray(cv2.dilate(for_high, square), dtype=np.float32)
@@ -170,12 +170,9 @@ def read_surface(depth_m: Float32Array, lens: Intrinsics, support: Support) -> S
         # Independent errors' tails make steps here and there on a flat top and shatter it: a
         # step counts where the heights through a 3 x 3 median step too, a pixel away at most
         # (the median rounds a corner off), or at a crack a pixel wide (which it wipes out).
-        valid = counted > 0
-        settled = np.asarray(
-            cv2.medianBlur(np.where(valid, height, np.float32(0.0)), 3), np.float32
-        )
-        settled_high = np.where(valid, settled, np.float32(-np.inf))
-        settled_low = np.where(valid, settled, np.float32(np.inf))
+        settled = np.asarray(cv2.medianBlur(kernels.read_or(height, counted, 0.0), 3), np.float32)
+        settled_high = kernels.read_or(settled, counted, -np.inf)
+        settled_low = kernels.read_or(settled, counted, np.inf)
         near = kernels.settled_steps(
             height,
             sigma,
@@ -183,7 +180,7 @@ def read_surface(depth_m: Float32Array, lens: Intrinsics, support: Support) -> S
             np.asarray(cv2.erode(settled_low, square), np.float32),
             limits,
         )
-        step &= cv2.dilate(near, square) > 0
+        kernels.keep_flags(step, np.asarray(cv2.dilate(near, square), np.uint8))
     return Surface(height, sigma, up, step, slope, reach, quiet)
 
 
