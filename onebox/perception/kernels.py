@@ -1220,25 +1220,98 @@ def drop_small(labels: IntArray, min_pixels: int) -> IntArray:
 
 
 @numba.njit(cache=True, nogil=True)
+def _reflect(i: int, size: int) -> int:
+    """Index ``i`` (one past either end at most) reflected into 0..size - 1 without repeating
+    the edge pixel, as OpenCV's default border (BORDER_REFLECT_101) reads it."""
+    if i < 0:
+        return -i
+    if i >= size:
+        return 2 * (size - 1) - i
+    return i
+
+
+@numba.njit(cache=True, nogil=True)
+def laplacian_counts(grey: npt.NDArray[np.uint8]) -> npt.NDArray[np.int64]:
+    """How many pixels, of every second row and column from the first, have each absolute
+    value (0 to 1020) of the picture's Laplacian: ``np.bincount(np.abs(cv2.Laplacian(grey,
+    cv2.CV_16S)[::2, ::2]).ravel(), minlength=1021)`` (its 3 x 3 kernel, whole numbers, the
+    border as OpenCV reads it; at least 2 x 2 pixels)."""
+    rows, cols = grey.shape
+    counts = np.zeros(1021, dtype=np.int64)
+    for r in range(0, rows, 2):
+        up, down = _reflect(r - 1, rows), _reflect(r + 1, rows)
+        for c in range(0, cols, 2):
+            left, right = _reflect(c - 1, cols), _reflect(c + 1, cols)
+            value = (
+                np.int64(grey[up, c])
+                + np.int64(grey[down, c])
+                + np.int64(grey[r, left])
+                + np.int64(grey[r, right])
+                - 4 * np.int64(grey[r, c])
+            )
+            counts[abs(value)] += 1
+    return counts
+
+
+@numba.njit(cache=True, nogil=True)
 def seam_pixels(
     dark: npt.NDArray[np.uint8],
-    gx: Float32Array,
-    gy: Float32Array,
+    grey: npt.NDArray[np.uint8],
     dark_step: float,
     edge_step: float,
 ) -> npt.NDArray[np.uint8]:
     """1 where a pixel is on a thin dark line (``dark``, the black-hat, above ``dark_step``)
-    or on a strong colour edge (the Sobel gradient's squared length above ``edge_step``
-    squared, in float32 as NumPy compares it), else 0."""
+    or on a strong colour edge (the squared length of ``grey``'s 3 x 3 Sobel gradient, as
+    ``cv2.Sobel`` gives it in float32 (whole numbers, exact; the border as OpenCV reads it),
+    above ``edge_step`` squared, in float32 as NumPy compares it), else 0 (at least 2 x 2
+    pixels). But in the first and last columns the neighbours are read straight (a loop the
+    compiler vectorises)."""
     rows, cols = dark.shape
     edge = np.float32(edge_step * edge_step)
     result = np.zeros((rows, cols), dtype=np.uint8)
     for r in range(rows):
-        for c in range(cols):
-            on_line = dark[r, c] > dark_step
-            on_edge = gx[r, c] * gx[r, c] + gy[r, c] * gy[r, c] > edge
-            result[r, c] = on_line | on_edge
+        up, down = _reflect(r - 1, rows), _reflect(r + 1, rows)
+        for c in range(1, cols - 1):
+            result[r, c] = _seam_at(dark, grey, dark_step, edge, r, up, down, c, c - 1, c + 1)
+        for c in (0, cols - 1):
+            left, right = _reflect(c - 1, cols), _reflect(c + 1, cols)
+            result[r, c] = _seam_at(dark, grey, dark_step, edge, r, up, down, c, left, right)
     return result
+
+
+@numba.njit(cache=True, nogil=True)
+def _seam_at(
+    dark: npt.NDArray[np.uint8],
+    grey: npt.NDArray[np.uint8],
+    dark_step: float,
+    edge: np.float32,
+    r: int,
+    up: int,
+    down: int,
+    c: int,
+    left: int,
+    right: int,
+) -> np.uint8:
+    """:func:`seam_pixels` at (r, c), its neighbours in rows ``up`` and ``down`` and columns
+    ``left`` and ``right``."""
+    gx = (
+        np.int32(grey[up, right])
+        + 2 * np.int32(grey[r, right])
+        + np.int32(grey[down, right])
+        - np.int32(grey[up, left])
+        - 2 * np.int32(grey[r, left])
+        - np.int32(grey[down, left])
+    )
+    gy = (
+        np.int32(grey[down, left])
+        + 2 * np.int32(grey[down, c])
+        + np.int32(grey[down, right])
+        - np.int32(grey[up, left])
+        - 2 * np.int32(grey[up, c])
+        - np.int32(grey[up, right])
+    )
+    fx, fy = np.float32(gx), np.float32(gy)
+    return np.uint8((dark[r, c] > dark_step) | (fx * fx + fy * fy > edge))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -1407,7 +1480,9 @@ def warm_up() -> None:
     standing(flat, flat, one.reshape(1, 2), one.reshape(1, 2), 0.01, np.inf)
     drop_small(grid, 2)
     standing_bounds(flat, flat, 1.0, 0.01)
-    seam_pixels(np.zeros((2, 2), dtype=np.uint8), flat, flat, 1.0, 1.0)
+    grey = np.zeros((2, 2), dtype=np.uint8)
+    laplacian_counts(grey)
+    seam_pixels(grey, grey, 1.0, 1.0)
     plane_votes(np.eye(3), a[:1].repeat(3), np.eye(3), a[:1].repeat(3))
     one_top = np.ones((1, 2))
     seam_cuts(

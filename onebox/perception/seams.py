@@ -78,25 +78,33 @@ def seam_map(
     size = int(np.clip(round(SEAM_WIDTH_M * lens.fx / max(distance, 0.1)), SEAM_MIN_PX, 9)) | 1
     kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (size, size))
     dark = np.asarray(cv2.morphologyEx(grey, cv2.MORPH_BLACKHAT, kernel), dtype=np.uint8)
-    # The picture's own noise: the median absolute Laplacian (mostly flat regions).
-    laplacian = cv2.Laplacian(grey, cv2.CV_16S)
-    noise = _median_of_counts(np.abs(laplacian[::2, ::2])) / 4.0
-    gx = np.asarray(cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3), dtype=np.float32)
-    gy = np.asarray(cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3), dtype=np.float32)
+    # The picture's own noise: the median absolute Laplacian (mostly flat regions), at every
+    # second pixel each way.
+    if min(grey.shape) >= 2:
+        noise = _median_of_counts(kernels.laplacian_counts(grey)) / 4.0
+    else:
+        laplacian = np.abs(cv2.Laplacian(grey, cv2.CV_16S)[::2, ::2]).ravel()
+        noise = _median_of_counts(np.bincount(laplacian)) / 4.0
     # A Sobel response is 4 x the step between neighbours.
-    seam = kernels.seam_pixels(
-        dark, gx, gy, max(DARK_STEP, 4.0 * noise), 4.0 * max(EDGE_STEP, 6.0 * noise)
-    )
+    dark_step, edge_step = max(DARK_STEP, 4.0 * noise), 4.0 * max(EDGE_STEP, 6.0 * noise)
+    if min(grey.shape) >= 2:
+        seam = kernels.seam_pixels(dark, grey, dark_step, edge_step)
+    else:  # a line of pixels: OpenCV's gradient, the same test
+        gx = np.asarray(cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3), dtype=np.float32)
+        gy = np.asarray(cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3), dtype=np.float32)
+        edge = gx * gx + gy * gy > np.float32(edge_step * edge_step)
+        seam = ((dark > dark_step) | edge).astype(np.uint8)
     result: BoolArray = np.asarray(cv2.dilate(seam, np.ones((3, 3), np.uint8)), dtype=bool)
     return result, np.asarray(grey, dtype=np.uint8)
 
 
-def _median_of_counts(values: npt.NDArray[np.int16]) -> float:
-    """``np.median`` of small non-negative whole numbers, from their histogram (no sort)."""
-    counts = np.cumsum(np.bincount(values.ravel()))
-    total = int(counts[-1])
-    below = int(np.searchsorted(counts, (total - 1) // 2, side="right"))
-    above = int(np.searchsorted(counts, total // 2, side="right"))
+def _median_of_counts(counts: npt.NDArray[np.int64]) -> float:
+    """``np.median`` of small non-negative whole numbers, from how many there are of each
+    (``counts[v]`` of value v; no sort)."""
+    running = np.cumsum(counts)
+    total = int(running[-1])
+    below = int(np.searchsorted(running, (total - 1) // 2, side="right"))
+    above = int(np.searchsorted(running, total // 2, side="right"))
     return 0.5 * (below + above)
 
 
