@@ -754,6 +754,49 @@ def test_the_kernels_measure_what_numpy_does():
         assert abs((np.degrees(found[k]) - turn + 45.0) % 90.0 - 45.0) < 1.5
 
 
+@pytest.mark.parametrize("shape", [(2, 2), (3, 2), (2, 7), (5, 6), (31, 44)])
+def test_the_kernels_read_the_colour_as_opencv_does(shape: tuple[int, int]):
+    """kernels.laplacian_counts and seam_pixels: the Laplacian's absolute values at every
+    second pixel, and the Sobel gradient's test, exactly as OpenCV's filters (and their
+    reflected border) give them, down to a picture two pixels a side."""
+    rng = np.random.default_rng(shape[0] * 100 + shape[1])
+    grey = rng.integers(0, 256, shape).astype(np.uint8)
+    grey[:, : shape[1] // 2] //= 8  # a strong edge as well as noise
+    dark = rng.integers(0, 60, shape).astype(np.uint8)
+    laplacian = np.abs(cv2.Laplacian(grey, cv2.CV_16S)[::2, ::2]).ravel()
+    counts = kernels.laplacian_counts(grey)
+    assert np.array_equal(counts[: laplacian.max() + 1], np.bincount(laplacian))
+    assert counts[laplacian.max() + 1 :].sum() == 0
+    gx = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3)
+    gy = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3)
+    for dark_step, edge_step in ((25.0, 120.0), (40.0, 400.0)):
+        want = (dark > dark_step) | (gx * gx + gy * gy > np.float32(edge_step * edge_step))
+        found = kernels.seam_pixels(dark, grey, dark_step, edge_step)
+        assert found.dtype == np.uint8 and np.array_equal(found, want.astype(np.uint8))
+
+
+def test_the_kernels_find_settled_steps_as_numpy_does():
+    """kernels.settled_steps: a crack a pixel wide along a row or a column (the picture
+    wrapping round at its edges, as np.roll does) or a 3 x 3 spread beyond the step, as the
+    NumPy it stands in for finds them, in float32."""
+    rng = np.random.default_rng(3)
+    height = rng.normal(0.05, 0.004, (23, 31)).astype(np.float32)
+    height[5, :] -= 0.02  # a crack along a row
+    height[:, 0] -= 0.02  # the first column low, but as low as the last, its neighbour
+    height[:, -1] -= 0.02  # round the picture's edge: no crack either
+    sigma = rng.uniform(0.0005, 0.0015, height.shape).astype(np.float32)
+    high = height + rng.uniform(0.0, 0.0025, height.shape).astype(np.float32)
+    low = height - rng.uniform(0.0, 0.0025, height.shape).astype(np.float32)
+    limits = np.array([0.0005, 0.9, 5.0, 0.004, 0.25, 500.0], dtype=np.float32)
+    threshold = np.maximum(limits[2] * sigma, limits[3])
+    lower = [height < np.roll(height, shift, axis) - threshold for shift, axis in
+             ((1, 1), (-1, 1), (1, 0), (-1, 0))]  # fmt: skip
+    want = (lower[0] & lower[1]) | (lower[2] & lower[3]) | (high - low > threshold)
+    found = kernels.settled_steps(height, sigma, high, low, limits)
+    assert want[5].all() and not (high - low > threshold).all()
+    assert np.array_equal(found, want.astype(np.uint8))
+
+
 # --- a stream of pictures ------------------------------------------------------------------------
 def test_a_stream_keeps_the_support_the_ids_and_still_boxes_still():
     """Sixteen noisy pictures of two still boxes: one plane fit, the same two ids throughout,
