@@ -549,26 +549,27 @@ def seam_cuts(
             offset[k + 1] = offset[k] + max(math.ceil(extent[k] / step[k]) + 2, 1)
         total = offset[n]
         owner = np.empty(total, dtype=np.int64)
+        third = np.empty(n)  # (each top's once, not a division at every pixel)
         for k in range(n):
             owner[offset[k] : offset[k + 1]] = k
+            third[k] = span[k] / 3.0
         # Per slot: pixels, pixels on a seam, and in the outer third on either side: all of
         # them and those on a seam; the sum of grey levels.
         sums = np.zeros((total, 7))
-        slot = np.empty(count, dtype=np.int64)
         for i in range(count):
             k = top[i]
             bins = int(np.floor((coordinate[i] + 0.5 * extent[k]) / step[k])) + 1
-            slot[i] = offset[k] + min(max(bins, 0), offset[k + 1] - offset[k] - 1)
-            row = sums[slot[i]]
-            row[0] += 1.0
-            row[1] += on_seam[i]
-            if other[i] > span[k] / 3.0:
-                row[2] += 1.0
-                row[3] += on_seam[i]
-            if -other[i] > span[k] / 3.0:
-                row[4] += 1.0
-                row[5] += on_seam[i]
-            row[6] += shade[i]
+            s = offset[k] + min(max(bins, 0), offset[k + 1] - offset[k] - 1)
+            # (Indexed straight: a view of the row would be counted and let go at every pixel.)
+            sums[s, 0] += 1.0
+            sums[s, 1] += on_seam[i]
+            if other[i] > third[k]:
+                sums[s, 2] += 1.0
+                sums[s, 3] += on_seam[i]
+            if -other[i] > third[k]:
+                sums[s, 4] += 1.0
+                sums[s, 5] += on_seam[i]
+            sums[s, 6] += shade[i]
         share = np.zeros(total)
         for s in range(total):
             share[s] = sums[s, 1] / max(sums[s, 0], 1.0)
