@@ -71,7 +71,7 @@ def seam_map(
 ) -> tuple[BoolArray, npt.NDArray[np.uint8]]:
     """Pixels on thin dark lines or strong colour edges (dilated a pixel, so a line is
     solid), and the grey picture they were found in."""
-    grey = cv2.cvtColor(np.ascontiguousarray(colour), cv2.COLOR_RGB2GRAY)
+    grey = np.asarray(cv2.cvtColor(np.ascontiguousarray(colour), cv2.COLOR_RGB2GRAY), np.uint8)
     sample = depth_m[:: max(1, depth_m.shape[0] // 32), :: max(1, depth_m.shape[1] // 32)]
     finite = sample[np.isfinite(sample)]
     distance = _median(finite) if finite.size else 1.0
@@ -95,7 +95,7 @@ def seam_map(
         edge = gx * gx + gy * gy > np.float32(edge_step * edge_step)
         seam = ((dark > dark_step) | edge).astype(np.uint8)
     result: BoolArray = np.asarray(cv2.dilate(seam, np.ones((3, 3), np.uint8)), dtype=bool)
-    return result, np.asarray(grey, dtype=np.uint8)
+    return result, grey
 
 
 def _median(values: npt.NDArray[np.float32]) -> float:
