@@ -582,9 +582,9 @@ def seam_cuts(
             first, last = offset[k], offset[k + 1] - 1
             around = 0.0
             counted = 0
-            for other in range(s - SEAM_AROUND[1], s + SEAM_AROUND[1] + 1):
-                if first <= other <= last and abs(other - s) >= SEAM_AROUND[0]:
-                    around += share[other]
+            for near in range(s - SEAM_AROUND[1], s + SEAM_AROUND[1] + 1):
+                if first <= near <= last and abs(near - s) >= SEAM_AROUND[0]:
+                    around += share[near]
                     counted += 1
             around /= max(counted, 1)
             position[s] = (s - offset[k] - 0.5) * step[k] - 0.5 * extent[k]
@@ -632,12 +632,12 @@ def seam_cuts(
             # ... or one edge of a strip of its own shade anywhere, no wider than a roll of
             # tape, with alike flaps either side (a band as wide as the strip).
             reach = math.ceil(widest_strip / step[k])
-            for other in range(max(s - reach, first), min(s + reach, last) + 1):
+            for mate in range(max(s - reach, first), min(s + reach, last) + 1):
                 if tape:
                     break
-                if abs(other - s) * step[k] < narrowest_strip or not strong[other]:
+                if abs(mate - s) * step[k] < narrowest_strip or not strong[mate]:
                     continue
-                low, high = min(s, other), max(s, other)
+                low, high = min(s, mate), max(s, mate)
                 wide = high - low
                 if low - wide < first or high + wide > last:
                     continue

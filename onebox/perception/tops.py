@@ -146,7 +146,7 @@ def standing_regions(surface: Surface, min_height_m: float, max_height_m: float 
         min_height_m,
         np.inf if max_height_m is None else max_height_m,
     )
-    opened = cv2.morphologyEx(core, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+    opened = np.asarray(cv2.morphologyEx(core, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8)), np.uint8)
     if surface.quiet.any():
         # Where the depth is quiet a pixel-wide spur is still a stray, but a top two or three
         # pixels wide (a narrow box seen from far, slanting across the rows) is no streak.
