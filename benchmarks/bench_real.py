@@ -40,7 +40,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from onebox.perception import kernels
+from onebox import memory
 from onebox.perception.boxes import Box, find_boxes
 from onebox.testing.realdata import (
     COMMITTED,
@@ -176,7 +176,7 @@ def main() -> int:
     try:
         first = read_capture(args.data, names[0])
         start = time.perf_counter()
-        kernels.warm_up()  # as the locator does when it starts
+        memory.bound_heap()  # as the locator does when it starts
         find_boxes(first.depth_m, first.lens, None, colour=first.colour if colour else None)
         print(
             f"warm-up: {(time.perf_counter() - start) * 1000:.0f} ms "

@@ -1,11 +1,14 @@
-"""Keeping a long-running process's memory flat under a flood of large pictures.
+"""Malloc for a long-running process that handles a stream of large pictures.
 
-glibc's malloc raises its mmap threshold each time a large block is freed (up to 32 MiB), so
-after the first few pictures every 1.2 MB depth picture comes from a heap arena instead of its
-own mapping; with Zenoh's callback threads each taking an arena of its own, the freed pictures
-leave holes that are never given back, and the resident size climbs run after run. A fixed
-threshold puts every picture in its own mapping, returned to the system when freed; two arenas
-bound how many heaps can fragment; :func:`trim` gives back what the arenas hold free.
+A picture's arrays are a few MB each. glibc's malloc maps each block that large afresh and
+unmaps it when freed, so every picture's pages are faulted in again (on a 640 x 480 stereo or
+YCB-Video capture, a quarter of the box finder's time); and left to itself it raises its mmap
+threshold as large blocks are freed while Zenoh's callback threads each take an arena of their
+own, so the freed pictures leave holes across many heaps and the resident size climbs.
+:func:`bound_heap` fixes the threshold at glibc's largest (blocks up to 32 MiB come from the
+heap, where the next picture reuses them) and keeps up to 256 MiB free on the heap rather than
+give it back at every free; two arenas bound how many heaps can fragment; :func:`trim` gives
+back what the arenas hold free, once an interval.
 
 ``ONEBOX_MALLOC=glibc`` leaves glibc's defaults, to measure the difference
 (``benchmarks/bench_faults.py`` does).
@@ -23,8 +26,10 @@ log = logging.getLogger("memory")
 M_TRIM_THRESHOLD = -1
 M_MMAP_THRESHOLD = -3
 M_ARENA_MAX = -8
-MMAP_THRESHOLD_BYTES = 128 * 1024
-"""glibc's own starting value, kept fixed: a picture is far larger, a small message far smaller."""
+MMAP_THRESHOLD_BYTES = 32 * 1024 * 1024
+"""glibc's largest: a picture's blocks come from the heap and are reused, not mapped afresh."""
+TRIM_THRESHOLD_BYTES = 256 * 1024 * 1024
+"""Free memory the heap keeps for the next picture between :func:`trim` calls."""
 ARENAS = 2
 
 
@@ -36,12 +41,14 @@ def _libc() -> ctypes.CDLL | None:
 
 
 def bound_heap() -> bool:
-    """Fix malloc's mmap threshold and cap its arenas; call before threads start. True if set."""
+    """Fix malloc's mmap and trim thresholds and cap its arenas; call before threads start.
+    True if set."""
     libc = _libc()
     if libc is None:
         return False
     ok = bool(libc.mallopt(M_ARENA_MAX, ARENAS) == 1)
     ok = bool(libc.mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES) == 1) and ok
+    ok = bool(libc.mallopt(M_TRIM_THRESHOLD, TRIM_THRESHOLD_BYTES) == 1) and ok
     if not ok:
         log.info("malloc kept its defaults (mallopt refused)")
     return ok

@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import os
+import platform
 import re
+import subprocess
+import sys
 import time
 from dataclasses import replace
 
@@ -447,3 +451,21 @@ def test_end_to_end_with_the_sim(locators, processes, test_bus, inbox):
     # Each of the two new sims starts its clock at 0: its depth and its camera info each go
     # back once, and nothing else does.
     assert output.text.count("stamp went back") <= 4
+
+
+@pytest.mark.parametrize("malloc", ["onebox", "glibc"])
+def test_the_heap_is_bound_as_the_locator_starts_unless_glibc_is_asked_for(malloc):
+    """memory.bound_heap (called by the locator and the recorder before Zenoh's threads start)
+    sets malloc's thresholds and arenas on glibc, and leaves glibc's defaults with
+    ONEBOX_MALLOC=glibc; a fresh process each time, as the setting lasts a process's life."""
+    env = {**os.environ, "ONEBOX_MALLOC": malloc}
+    done = subprocess.run(
+        [sys.executable, "-c", "from onebox import memory; print(memory.bound_heap())"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=True,
+    )
+    on_glibc = sys.platform.startswith("linux") and platform.libc_ver()[0] == "glibc"
+    assert done.stdout.strip() == str(on_glibc and malloc == "onebox")

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import platform
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -870,10 +869,3 @@ def test_pictures_that_show_no_jump_leave_the_colour_where_it_is():
         measured = register.colour_offset(d, c, 0.0005)
         assert (measured.shift, measured.sure) == ((0, 0), False)
     assert register.colour_offset(np.zeros_like(depth), colour, 0.0005).jumps == 0
-
-
-def test_freed_memory_is_kept_where_the_c_library_is_glibcs():
-    """kernels.keep_freed_memory sets glibc's thresholds (so a picture's freed arrays serve the
-    next picture) and says so; elsewhere it says it did nothing."""
-    took = kernels.keep_freed_memory()
-    assert took is (platform.libc_ver()[0] == "glibc")

@@ -1,6 +1,5 @@
 """The finder's loops over pixels, tops and probes, compiled with numba (cached on disk where
-the install allows; :func:`warm_up` compiles them before the first picture, and keeps the
-memory a picture frees for the next one).
+the install allows; :func:`warm_up` compiles them before the first picture).
 
 Each does in one or a few passes what would otherwise be dozens of NumPy calls, each making a
 temporary array: over the picture (the surface reading and its masks, the standing pixels,
@@ -20,7 +19,6 @@ simulator, waiting for the second core at every loop cost a picture up to ten ti
 
 from __future__ import annotations
 
-import ctypes
 import math
 
 import numba
@@ -1432,31 +1430,8 @@ def depth_steps(depth: Float32Array, every: int) -> Float64Array:
     return result[:count]
 
 
-MALLOC_MMAP_THRESHOLD_B = 32 << 20
-"""Blocks up to this size come from the heap, not each from the OS (glibc's largest)..."""
-MALLOC_TRIM_THRESHOLD_B = 256 << 20
-"""...and the heap keeps this much freed before handing memory back."""
-
-
-def keep_freed_memory() -> bool:
-    """Have glibc keep the memory a picture frees for the next picture, rather than give it
-    back to the OS and fault every page of it in again (a picture's arrays are a few MB:
-    touching fresh pages cost a 640 x 480 picture from a stereo camera a quarter of its time).
-    Whether it took (False where the C library is not glibc)."""
-    try:
-        mallopt = ctypes.CDLL(None).mallopt
-    except (OSError, AttributeError, TypeError):  # no C library to name, or not glibc's
-        return False
-    m_trim_threshold, m_mmap_threshold = -1, -3
-    return bool(mallopt(m_mmap_threshold, MALLOC_MMAP_THRESHOLD_B)) and bool(
-        mallopt(m_trim_threshold, MALLOC_TRIM_THRESHOLD_B)
-    )
-
-
 def warm_up() -> None:
-    """Ready the process for pictures: keep freed memory (:func:`keep_freed_memory`), and
-    compile (or load from the cache) every kernel on a tiny input."""
-    keep_freed_memory()
+    """Compile (or load from the cache) every kernel on a tiny input."""
     label = np.zeros(2, dtype=np.int32)
     a = np.array([0.0, 1.0])
     one = np.ones(2, dtype=np.bool_)
