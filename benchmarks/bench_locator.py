@@ -44,6 +44,7 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage
 
+from onebox import memory
 from onebox.geometry import to_world
 from onebox.perception import seed as seed_method
 from onebox.perception.boxes import FinderSettings, find_boxes, read_stride
@@ -572,6 +573,7 @@ def main() -> None:
         help="also time the finder on 0, 1, 4 and 12 boxes at three picture sizes",
     )
     args = parser.parse_args()
+    memory.bound_heap()  # malloc as the locator sets it
     speed(args.repeats)
     first_picture_cost()
     if args.scaling:
