@@ -508,9 +508,11 @@ def seam_cuts(
     Each top's cross-sections along each axis, bins a pixel wide, count their pixels on
     ``seam`` (flat, the picture's), overall and in each of the outer thirds across; a
     cross-section is a seam when ``limits`` (min part, min seam length, seam share, over
-    print, end share, shade step) say so and it is not one edge of a strip of tape (its mirror
-    about the middle also a seam, the strip between them in a shade of ``grey`` its own, the
-    flaps either side alike)."""
+    print, end share, shade step, narrowest and widest strip) say so: it holds half a typical
+    cross-section at least, stands out from the top's print on average and from the
+    cross-sections a few pixels either side, and is not one edge of a strip of tape (another
+    seam-like cross-section the strip's width away, or its mirror about the middle, the strip
+    between them in a shade of ``grey`` its own, the flaps either side alike)."""
     min_part, min_seam, seam_share, over_print, end_share, shade_step = limits[:6]
     narrowest_strip, widest_strip = limits[6], limits[7]
     n = len(length)

@@ -9,9 +9,9 @@ from one side of the region to the other, parallel to a side (packed cartons are
 Contract: :func:`seam_map` marks the pixels of thin dark lines and strong colour edges, with
 tolerances from the picture's own noise; :func:`split_at_seams` cuts every top that such a
 line crosses from side to side (``SEAM_SHARE`` of the cross-section's pixels, clearly more
-than the top's print elsewhere) into two, returning the new labels or None when nothing is
-cut. Every top's cross-sections are counted at once, in one pass over the pixels
-(:func:`onebox.perception.kernels.seam_cuts`).
+than the top's print elsewhere and beside the line; not an edge of tape) into two, returning
+the new labels or None when nothing is cut. Every top's cross-sections are counted at once,
+in one pass over the pixels (:func:`onebox.perception.kernels.seam_cuts`).
 """
 
 from __future__ import annotations
