@@ -363,8 +363,6 @@ class Round:
     lower_m: Float64Array
     """(n, 4, PROBES_PER_SIDE): the height seen past the side where it is lower than the top
     (NaN where not)."""
-    cut_off: BoolArray
-    """Past the side lies outside the picture."""
     sloping: BoolArray
     """Past the side the surface goes on down at no level: a side face seen at a slant, or a
     round or ragged body."""
@@ -420,7 +418,6 @@ def _look_round(
         seen_height += support.offset_camera_m  # height along the same ray, by similar triangles
         lower = np.where(seen > z_expected + tolerance, seen_height, np.nan)
     hidden = nearer.mean(axis=2) >= HIDDEN_SHARE
-    cut_off = (~inside).mean(axis=2) >= HIDDEN_SHARE
     covered, corners_covered = _covered(tops, depth_m, lens, support)
     # A lower surface at no level (neither the support nor any top) is the object going on
     # down past its top: a box's own side face seen at a slant, or a curved or ragged body.
@@ -433,7 +430,7 @@ def _look_round(
     seen_top = np.where(
         in_crop, tops.labels[np.clip(vc, 0, rows - 1), np.clip(uc, 0, cols - 1)] - 1, -1
     )
-    return Round(hidden, lower, cut_off, sloping, seen_top, ab, covered, corners_covered)
+    return Round(hidden, lower, sloping, seen_top, ab, covered, corners_covered)
 
 
 def _lens_array(lens: Intrinsics) -> Float64Array:
@@ -492,7 +489,7 @@ def _boxes(
         & ~((tops.sag_share > CURVED_SHARE) & (tops.sag_m > CURVED_SIGMAS * sag_noise))
     )
     if not settings.keep_cut_off:
-        result &= ~tops.on_border & ~round_.cut_off.any(axis=1)
+        result &= ~tops.on_border
     return result
 
 

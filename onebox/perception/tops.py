@@ -63,6 +63,9 @@ JOIN_SAMPLES = 24
 """Points looked at between two pieces of a top that something nearer may have cut apart."""
 PINCHED_PX = 8.0
 """A top narrower than this many pixels is pinched in two where its edges' steps narrow it."""
+BORDER_PX = 3
+"""A top this close to the picture's edge may go on past it (its edge pixels smeared or cut at
+a step): cut off, its extent unknown."""
 SEAM_ROUNDS = 3
 """Splitting at seams and measuring again, at most this often (a seam that crosses one part
 only shows once the other is split off)."""
@@ -106,7 +109,7 @@ class Tops:
     """The depth noise at that distance."""
     pixels: IntArray
     on_border: BoolArray
-    """Touches the picture's border: cut off, its extent unknown."""
+    """Comes within ``BORDER_PX`` of the picture's edge: cut off, its extent unknown."""
     basis: Float64Array
     """(3, 3): e1, e2 and the support normal, rows, in the optical frame."""
     points: Points
@@ -384,7 +387,15 @@ def _measure(
         slope,
         centroid,
     ) = measured
-    border = np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]])
+    band = BORDER_PX
+    border = np.concatenate(
+        [
+            labels[:band].ravel(),
+            labels[-band:].ravel(),
+            labels[:, :band].ravel(),
+            labels[:, -band:].ravel(),
+        ]
+    )
     on_border = np.bincount(border, minlength=n + 1)[1:] > 0
     return Tops(
         labels=labels,
