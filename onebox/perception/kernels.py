@@ -1098,17 +1098,9 @@ def top_points(
     another label or none among its 8 neighbours in the picture) and its ray's x/z and y/z
     (``across`` per column, ``down`` per row)."""
     rows, cols = labels.shape
-    n = 0
-    for r in range(rows):
-        for c in range(cols):
-            n = max(n, labels[r, c])
-    # Counted in four tallies, by column (as in drop_small), summed after.
-    tallies = np.zeros((4, n + 1), dtype=np.intp)
-    for r in range(rows):
-        for c in range(cols):
-            if labels[r, c] > 0:
-                tallies[c & 3, labels[r, c]] += 1
-    start = tallies[0] + tallies[1] + tallies[2] + tallies[3]
+    start = _label_sizes(labels)
+    n = len(start) - 1
+    start[0] = 0  # the pixels of no top
     for k in range(n):
         start[k + 1] += start[k]
     count = start[n]
@@ -1199,21 +1191,30 @@ def standing(
 
 
 @numba.njit(cache=True, nogil=True)
+def _label_sizes(labels: IntArray) -> npt.NDArray[np.intp]:
+    """How many pixels hold each label, 0 to the largest (0: no region). Counted in four
+    tallies, by column, summed after: a run of one label does not wait on its own count from
+    the pixel before."""
+    rows, cols = labels.shape
+    largest = 0
+    for r in range(rows):
+        for c in range(cols):
+            largest = max(largest, labels[r, c])
+    tallies = np.zeros((4, largest + 1), dtype=np.intp)
+    for r in range(rows):
+        for c in range(cols):
+            tallies[c & 3, labels[r, c]] += 1
+    sizes: npt.NDArray[np.intp] = tallies[0] + tallies[1] + tallies[2] + tallies[3]
+    return sizes
+
+
+@numba.njit(cache=True, nogil=True)
 def drop_small(labels: IntArray, min_pixels: int) -> IntArray:
     """``labels`` without the regions of fewer than ``min_pixels`` pixels, the rest numbered
     1, 2, ... in their order."""
     rows, cols = labels.shape
-    count = 0
-    for r in range(rows):
-        for c in range(cols):
-            count = max(count, labels[r, c])
-    # Counted in four tallies, by column, summed after: a run of one label does not wait
-    # on its own count from the pixel before.
-    tallies = np.zeros((4, count + 1), dtype=np.int64)
-    for r in range(rows):
-        for c in range(cols):
-            tallies[c & 3, labels[r, c]] += 1
-    sizes = tallies[0] + tallies[1] + tallies[2] + tallies[3]
+    sizes = _label_sizes(labels)
+    count = len(sizes) - 1
     renumber = np.zeros(count + 1, dtype=np.int32)
     kept = 0
     for k in range(1, count + 1):
