@@ -174,9 +174,9 @@ def main() -> int:
     progress = sys.stderr.isatty()
     interrupted = False
     try:
+        memory.bound_heap()  # as the locator does when it starts
         first = read_capture(args.data, names[0])
         start = time.perf_counter()
-        memory.bound_heap()  # as the locator does when it starts
         find_boxes(first.depth_m, first.lens, None, colour=first.colour if colour else None)
         print(
             f"warm-up: {(time.perf_counter() - start) * 1000:.0f} ms "
