@@ -690,6 +690,33 @@ def test_a_turned_boxs_top_is_measured_as_its_rectangle():
     assert tops.height_m[0] == pytest.approx(0.07, abs=1e-4) and tops.fill[0] > 0.95
 
 
+@pytest.mark.parametrize(("past_px", "reported"), [(3.0, True), (8.0, False)])
+def test_a_top_the_pictures_edge_runs_along_is_cut_off(past_px, reported):
+    """Straight down, a box turned 40 degrees with a corner past the picture's left edge: 3
+    pixels past, the edge only grazes a corner of the top (its sides still seen), and the box
+    is reported, its size within 3 mm; 8 pixels past, the edge runs along the top, cut off,
+    and it is not (but is with ``keep_cut_off``, its size a lower bound)."""
+    camera = Camera.looking_at((0, 0, 0.8), (0, 0, 0), 640, 480)
+    lens, pose = camera.lens, camera.camera_to_world
+    size, yaw = (0.16, 0.1, 0.07), 40.0
+    corners = np.array([[sx * size[0] / 2, sy * size[1] / 2] for sx in (1, -1) for sy in (1, -1)])
+    turn = np.radians(yaw)
+    rotation = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
+    xy = corners @ rotation.T
+    top = np.c_[xy, np.full(4, size[2]), np.ones(4)] @ np.linalg.inv(pose).T
+    u = lens.fx * top[:, 0] / top[:, 2] + lens.cx
+    shift_px = -past_px - u.min()  # the leftmost corner at column -past_px
+    x = shift_px * float(np.mean(top[:, 2])) / lens.fx * float(np.sign(pose[0, 0]))
+    box = box_on(P, x, 0.0, size, yaw)
+    depth, _ = render(Scene(camera, P, (box,)))
+    found = find_boxes(depth, lens, pose).boxes
+    assert len(found) == int(reported)
+    if reported:
+        assert found[0].size[:2] == pytest.approx(size[:2], abs=0.003)
+    kept = find_boxes(depth, lens, pose, settings=FinderSettings(keep_cut_off=True)).boxes
+    assert len(kept) == 1 and kept[0].size[0] <= size[0] + 0.003
+
+
 @pytest.mark.parametrize("distance_m", [0.8, 1.5])
 def test_a_thin_dark_line_parts_two_cartons_of_one_height(distance_m):
     """Two cartons of one brown touching end to end: one top in depth; with colour, a dark line

@@ -65,7 +65,11 @@ PINCHED_PX = 8.0
 """A top narrower than this many pixels is pinched in two where its edges' steps narrow it."""
 BORDER_PX = 3
 """A top this close to the picture's edge may go on past it (its edge pixels smeared or cut at
-a step): cut off, its extent unknown."""
+a step)..."""
+ALONG_BORDER_PX = 12
+"""...when it runs along the edge for more than this many pixels: cut off, its extent unknown.
+A corner that only touches the edge spans 6-9 pixels of that band (sides at 45-20 degrees to
+it); the rectangle then loses a pixel or two at most."""
 SEAM_ROUNDS = 3
 """Splitting at seams and measuring again, at most this often (a seam that crosses one part
 only shows once the other is split off)."""
@@ -387,16 +391,7 @@ def _measure(
         slope,
         centroid,
     ) = measured
-    band = BORDER_PX
-    border = np.concatenate(
-        [
-            labels[:band].ravel(),
-            labels[-band:].ravel(),
-            labels[:, :band].ravel(),
-            labels[:, -band:].ravel(),
-        ]
-    )
-    on_border = np.bincount(border, minlength=n + 1)[1:] > 0
+    on_border = _on_border(labels, n)
     return Tops(
         labels=labels,
         height_m=height,
@@ -420,6 +415,22 @@ def _measure(
         basis=basis,
         points=pts,
     )
+
+
+def _on_border(labels: IntArray, n: int) -> BoolArray:
+    """Which of the ``n`` tops run along the picture's edge (``ALONG_BORDER_PX`` or more within
+    ``BORDER_PX`` of it): their extent past it is unknown."""
+    band = BORDER_PX
+    cut = np.zeros(n + 1, dtype=bool)
+    for strip in (labels[:band], labels[-band:], labels[:, :band].T, labels[:, -band:].T):
+        low = np.full(n + 1, labels.size, dtype=np.intp)
+        high = np.full(n + 1, -1, dtype=np.intp)
+        _, along = np.nonzero(strip)
+        top = strip[strip > 0]
+        np.minimum.at(low, top, along)
+        np.maximum.at(high, top, along)
+        cut |= high - low >= ALONG_BORDER_PX
+    return cut[1:]
 
 
 def _kept(before: Tops, labels: IntArray, start: npt.NDArray[np.intp]) -> npt.NDArray[np.intp]:
