@@ -717,6 +717,35 @@ def test_a_top_the_pictures_edge_runs_along_is_cut_off(past_px, reported):
     assert len(kept) == 1 and kept[0].size[0] <= size[0] + 0.003
 
 
+@pytest.mark.parametrize("turn", [0.0, 35.0])
+def test_two_boxes_of_one_height_and_colour_touching_are_told_by_their_outline(turn):
+    """A narrow carton against the side of a wide one, one height, one brown, no seam: one
+    region in depth and colour, an L whose outline turns inward where they meet. Cut there, it
+    is two boxes, each its own size. A carton with a taller box in front hiding the same
+    corner is one box: what its outline leaves out is nearer, not lower."""
+    camera = tilted(0.9, 20.0)
+    brown = (170, 130, 80)
+    wide = box_on(P, 0.0, 0.0, (0.2, 0.12, 0.08), turn, brown)
+    x, y = turned(0.1 + 0.04, 0.06 - 0.02, turn)
+    narrow = box_on(P, x, y, (0.08, 0.04, 0.08), turn, brown)
+    depth, colour = render(Scene(camera, P, (wide, narrow)))
+    support = fit_support(depth, camera.lens, camera.camera_to_world)
+    surface = read_surface(depth, camera.lens, support)
+    tops = find_tops(depth, surface, camera.lens, support, colour, 0.01)
+    assert len(tops) == 2
+    found = find_boxes(depth, camera.lens, camera.camera_to_world, colour).boxes
+    for box, true in match(found, (wide, narrow)):
+        assert box.size == pytest.approx(true.size, abs=0.004)
+    x, y = turned(0.1 - 0.02, 0.06 + 0.05, turn)
+    front = box_on(P, x, y, (0.08, 0.06, 0.2), turn, (40, 90, 200))
+    camera = tilted(0.9, 35.0, azimuth_deg=90.0)
+    depth, colour = render(Scene(camera, P, (wide, front)))
+    found = find_boxes(depth, camera.lens, camera.camera_to_world, colour).boxes
+    ((box, _),) = match(found, (wide,))
+    assert len(found) == 2 and box.hidden_sides == 1
+    assert box.size[:2] == pytest.approx(wide.size[:2], abs=0.004)
+
+
 @pytest.mark.parametrize("distance_m", [0.8, 1.5])
 def test_a_thin_dark_line_parts_two_cartons_of_one_height(distance_m):
     """Two cartons of one brown touching end to end: one top in depth; with colour, a dark line

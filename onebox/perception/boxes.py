@@ -16,7 +16,8 @@ The pipeline, one module a physical effect:
 2. :mod:`~onebox.perception.surface`: every pixel's height above it, which way it faces, where
    the depth steps.
 3. :mod:`~onebox.perception.tops`: connected flat regions facing up, split where a seam seen
-   only in colour crosses them (:mod:`~onebox.perception.seams`), each measured as an oriented
+   only in colour crosses them (:mod:`~onebox.perception.seams`) or where their outline turns
+   inward round something lower (two tops side by side), each measured as an oriented
    rectangle on its own plane.
 4. Here:
 

@@ -662,6 +662,127 @@ def seam_cuts(
 
 
 @numba.njit(cache=True, nogil=True)
+def corner_cuts(
+    top: IntArray,
+    a: Float64Array,
+    b: Float64Array,
+    middle_ab: Float64Array,
+    axis_ab: Float64Array,
+    length: Float64Array,
+    width: Float64Array,
+    area: Float64Array,
+    pixels: IntArray,
+    wanted: npt.NDArray[np.bool_],
+    limits: Float64Array,
+) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.bool_], Float64Array, Float64Array]:
+    """Where each ``wanted`` top is best cut in two rectangles
+    (:func:`onebox.perception.tops.split_at_corners`): whether it is cut, whether along its
+    length (else across), where (the cut's offset from its rectangle's middle along that axis),
+    and each part's rectangle (from, to along that axis; from, to across it: the part below
+    the cut, then the part above).
+
+    Each top's cross-sections along each axis, bins a pixel wide, each spanning from its
+    first pixel across to its last; a cut between two bins leaves a part each side, each
+    filling the rectangle round it by its cross-sections' spans (a notch shows as shorter
+    spans; pixels differ in footprint across a top seen at a slant, spans do not). A cut
+    counts when ``limits`` (narrowest part, part fill, fill gained) say so: both parts at
+    least the narrowest part each way, each filling its rectangle, both by more than the
+    whole fills its own."""
+    min_part, part_fill, gain = limits[0], limits[1], limits[2]
+    n = len(length)
+    count = len(top)
+    along = np.empty(count)
+    across = np.empty(count)
+    for i in range(count):
+        k = top[i]
+        da = a[i] - middle_ab[k, 0]
+        db = b[i] - middle_ab[k, 1]
+        along[i] = da * axis_ab[k, 0] + db * axis_ab[k, 1]
+        across[i] = db * axis_ab[k, 0] - da * axis_ab[k, 1]
+    step = np.empty(n)
+    for k in range(n):
+        step[k] = math.sqrt(max(area[k] / max(pixels[k], 1), 1e-12))
+    cut = np.zeros(n, dtype=np.bool_)
+    cut_along = np.zeros(n, dtype=np.bool_)
+    cut_at = np.zeros(n)
+    parts = np.zeros((n, 8))
+    best = np.zeros(n)
+    for direction in range(2):
+        coordinate = along if direction == 0 else across
+        other = across if direction == 0 else along
+        extent = length if direction == 0 else width
+        offset = np.zeros(n + 1, dtype=np.int64)
+        for k in range(n):
+            slots = max(math.ceil(extent[k] / step[k]) + 2, 1) if wanted[k] else 0
+            offset[k + 1] = offset[k] + slots
+        total = offset[n]
+        held = np.zeros(total)
+        low = np.full(total, np.inf)
+        high = np.full(total, -np.inf)
+        for i in range(count):
+            k = top[i]
+            if not wanted[k]:
+                continue
+            bins = int(np.floor((coordinate[i] + 0.5 * extent[k]) / step[k])) + 1
+            s = offset[k] + min(max(bins, 0), offset[k + 1] - offset[k] - 1)
+            held[s] += 1.0
+            low[s] = min(low[s], other[i])
+            high[s] = max(high[s], other[i])
+        # Running from either end of each top: spans, extent across.
+        run_held = np.empty(total)
+        run_low = np.empty(total)
+        run_high = np.empty(total)
+        back_held = np.empty(total)
+        back_low = np.empty(total)
+        back_high = np.empty(total)
+        for k in range(n):
+            first, last = offset[k], offset[k + 1] - 1
+            if last <= first:
+                continue
+            held_so_far, lo, hi = 0.0, np.inf, -np.inf
+            for s in range(first, last + 1):
+                held_so_far += high[s] - low[s] + step[k] if held[s] > 0 else 0.0
+                lo, hi = min(lo, low[s]), max(hi, high[s])
+                run_held[s], run_low[s], run_high[s] = held_so_far, lo, hi
+            held_so_far, lo, hi = 0.0, np.inf, -np.inf
+            for s in range(last, first - 1, -1):
+                held_so_far += high[s] - low[s] + step[k] if held[s] > 0 else 0.0
+                lo, hi = min(lo, low[s]), max(hi, high[s])
+                back_held[s], back_low[s], back_high[s] = held_so_far, lo, hi
+            start, end = first, last
+            while start < last and held[start] == 0.0:
+                start += 1
+            while end > first and held[end] == 0.0:
+                end -= 1
+            whole = (end - start + 1) * (run_high[last] - run_low[last] + step[k])
+            whole_fill = run_held[last] / max(whole, 1e-12)
+            for s in range(start, end):
+                below_long = (s - start + 1) * step[k]
+                above_long = (end - s) * step[k]
+                below_wide = run_high[s] - run_low[s] + step[k]
+                above_wide = back_high[s + 1] - back_low[s + 1] + step[k]
+                if min(below_long, above_long, below_wide, above_wide) < min_part:
+                    continue
+                fill = min(
+                    run_held[s] * step[k] / (below_long * below_wide),
+                    back_held[s + 1] * step[k] / (above_long * above_wide),
+                )
+                if fill >= part_fill and fill >= whole_fill + gain and fill > best[k]:
+                    best[k] = fill
+                    cut[k] = True
+                    cut_along[k] = direction == 0
+                    from_ = (start - offset[k] - 1) * step[k] - 0.5 * extent[k]
+                    at = (s - offset[k]) * step[k] - 0.5 * extent[k]
+                    to = (end - offset[k]) * step[k] - 0.5 * extent[k]
+                    cut_at[k] = at
+                    parts[k, 0], parts[k, 1] = from_, at
+                    parts[k, 2], parts[k, 3] = run_low[s], run_high[s]
+                    parts[k, 4], parts[k, 5] = at, to
+                    parts[k, 6], parts[k, 7] = back_low[s + 1], back_high[s + 1]
+    return cut, cut_along, cut_at, parts
+
+
+@numba.njit(cache=True, nogil=True)
 def surface_heights(
     depth: Float32Array,
     slope: Float32Array,
@@ -1485,6 +1606,19 @@ def warm_up() -> None:
         np.ones(1),
         np.full(1, 2, dtype=np.int32),
         np.ones(6),
+    )
+    corner_cuts(
+        label,
+        a,
+        a,
+        one_top,
+        one_top,
+        np.ones(1),
+        np.ones(1),
+        np.ones(1),
+        np.full(1, 2, dtype=np.int32),
+        np.ones(1, dtype=np.bool_),
+        np.ones(3),
     )
     # A picture decoded from a message and the lens's cached rays are read-only arrays, for
     # which numba compiles a kernel apart: the kernels that take them are compiled for both.

@@ -121,7 +121,6 @@ def _median_of_counts(counts: npt.NDArray[np.int64]) -> float:
 
 def split_at_seams(tops: Tops, seam: BoolArray, grey: npt.NDArray[np.uint8]) -> IntArray | None:
     """New labels with every top cut at the seam that crosses it best, or None."""
-    labels = tops.labels
     index, top = tops.points.index, tops.points.top
     if index.size == 0:
         return None
@@ -154,6 +153,16 @@ def split_at_seams(tops: Tops, seam: BoolArray, grey: npt.NDArray[np.uint8]) -> 
     )
     if not cut_top.any():
         return None
+    return cut_labels(tops, cut_top, cut_along, cut_at)
+
+
+def cut_labels(
+    tops: Tops, cut_top: BoolArray, cut_along: BoolArray, cut_at: Float64Array
+) -> IntArray:
+    """New labels with each ``cut_top`` cut in two by a line across its rectangle's length
+    (``cut_along``) or its width, ``cut_at`` from its middle: the pixels past it a new top."""
+    labels = tops.labels
+    index, top = tops.points.index, tops.points.top
     n = len(tops)
     a = tops.points.a - tops.middle_ab[top, 0]
     b = tops.points.b - tops.middle_ab[top, 1]

@@ -23,7 +23,11 @@ How:
    the thin dark line between them (or a colour edge) runs straight across the region from
    side to side, which print and labels do not. Every region is split where such a line
    crosses it (:mod:`onebox.perception.seams`) and measured again.
-5. **Each top measured**: its plane (least squares on its points, in the support's
+5. **Two tops side by side at one height**, with no seam seen between them: one region whose
+   outline turns inward where they meet (an L, a T). A region that fills its rectangle poorly
+   is cut parallel to a side where both parts fill theirs, if what they leave of it is seen
+   lower, past it (nearer, it is one top partly hidden) (:func:`split_at_corners`).
+6. **Each top measured**: its plane (least squares on its points, in the support's
    coordinates), its oriented rectangle (the angle whose rectangle round the region's outline
    is smallest; the extent along each axis taken over the pixels whose cross-section is at
    least ``PROFILE_SHARE`` of a typical one, so a ragged or smeared edge's stray pixels do not
@@ -70,6 +74,23 @@ ALONG_BORDER_PX = 12
 """...when it runs along the edge for more than this many pixels: cut off, its extent unknown.
 A corner that only touches the edge spans 6-9 pixels of that band (sides at 45-20 degrees to
 it); the rectangle then loses a pixel or two at most."""
+CORNERED_FILL = 0.9
+"""A top filling less of its rectangle than this may be two tops side by side at one height
+(no step, no seam between them: their outline turns inward where they meet)..."""
+PART_FILL = 0.9
+"""...cut in two where each part fills its own rectangle this well at least..."""
+FILL_GAINED = 0.05
+"""...and by this much more than the whole fills its own..."""
+MIN_PART_M = 0.015
+"""...each part this wide at least each way (the narrowest box)..."""
+NOTCH_LOWER = 0.8
+"""...when what the parts leave of the whole's rectangle is seen lower than the top, past it,
+at this share of the points looked at there (nearer, it is a top partly hidden; no reading,
+nothing is known)."""
+NOTCH_GRID = 12
+"""Points looked at across the whole's rectangle each way, for what the parts leave of it."""
+CORNER_ROUNDS = 2
+"""Cutting at inward corners and measuring again, at most this often."""
 SEAM_ROUNDS = 3
 """Splitting at seams and measuring again, at most this often (a seam that crosses one part
 only shows once the other is split off)."""
@@ -184,14 +205,81 @@ def find_tops(
     joined = join_hidden(tops, depth_m, lens, support)
     if joined is not None:
         tops = _measure(joined, depth_m, surface, lens, basis, tops)
-    if seam is None:
-        return tops
-    for _ in range(SEAM_ROUNDS):
+    for _ in range(SEAM_ROUNDS if seam is not None else 0):
         split = seams.split_at_seams(tops, seam[0], seam[1])
         if split is None:
             break
         tops = _measure(split, depth_m, surface, lens, basis, tops)
+    for _ in range(CORNER_ROUNDS):
+        split = split_at_corners(tops, depth_m, lens, support)
+        if split is None:
+            break
+        tops = _measure(split, depth_m, surface, lens, basis, tops)
     return tops
+
+
+def split_at_corners(
+    tops: Tops, depth_m: Float32Array, lens: Intrinsics, support: Support
+) -> IntArray | None:
+    """New labels with every top that is two rectangles side by side cut in two, or None.
+
+    Two boxes of one height touching, with no seam seen between them, are one region whose
+    outline turns inward where they meet (an L, a T, two ends offset). A top filling less than
+    ``CORNERED_FILL`` of its rectangle is cut, parallel to a side, where both parts fill their
+    own rectangles (:func:`kernels.corner_cuts`), if what the parts leave of the whole's
+    rectangle is seen lower than the top: past it, not hidden by something nearer."""
+    wanted = tops.fill < CORNERED_FILL
+    if not wanted.any():
+        return None
+    cut, cut_along, cut_at, parts = kernels.corner_cuts(
+        tops.points.top,
+        tops.points.a,
+        tops.points.b,
+        tops.middle_ab,
+        tops.axis_ab,
+        tops.length_m,
+        tops.width_m,
+        tops.area_m2,
+        tops.pixels,
+        wanted,
+        np.array([MIN_PART_M, PART_FILL, FILL_GAINED]),
+    )
+    if not cut.any():
+        return None
+    k = np.flatnonzero(cut)
+    # Points across each cut top's rectangle, in (along the cut's axis, across it).
+    share = (np.arange(NOTCH_GRID) + 0.5) / NOTCH_GRID - 0.5
+    long_ = np.where(cut_along[k], tops.length_m[k], tops.width_m[k])
+    wide = np.where(cut_along[k], tops.width_m[k], tops.length_m[k])
+    u = share[None, :, None] * long_[:, None, None] + 0.0 * share[None, None, :]
+    v = share[None, None, :] * wide[:, None, None] + 0.0 * share[None, :, None]
+    step = np.sqrt(tops.area_m2[k] / np.maximum(tops.pixels[k], 1))[:, None, None]
+    p = parts[k][:, None, None, :]
+    inside = (
+        (u >= p[..., 0] - step) & (u <= p[..., 1] + step)
+        & (v >= p[..., 2] - step) & (v <= p[..., 3] + step)
+    ) | (
+        (u >= p[..., 4] - step) & (u <= p[..., 5] + step)
+        & (v >= p[..., 6] - step) & (v <= p[..., 7] + step)
+    )  # fmt: skip
+    # Back to the rectangle's own axes (along its length, across it), then the plane's.
+    along = np.where(cut_along[k, None, None], u, v)
+    across = np.where(cut_along[k, None, None], v, u)
+    axis = tops.axis_ab[k][:, None, None, :]
+    ab = tops.middle_ab[k][:, None, None, :] + (
+        along[..., None] * axis + across[..., None] * np.stack([-axis[..., 1], axis[..., 0]], -1)
+    )
+    height = np.broadcast_to(tops.height_m[k][:, None, None], u.shape)
+    z, seen, in_picture, _ = sight(ab, height, tops.basis, depth_m, lens, support)
+    tolerance = np.maximum(3.0 * tops.sigma_m[k], 0.003)[:, None, None]
+    notch = ~inside & in_picture
+    with np.errstate(invalid="ignore"):
+        lower = notch & (seen > z + tolerance)
+    looked = notch.sum(axis=(1, 2))
+    cut[k] = (looked >= 3) & (lower.sum(axis=(1, 2)) >= NOTCH_LOWER * looked)
+    if not cut.any():
+        return None
+    return seams.cut_labels(tops, cut, cut_along, cut_at)
 
 
 def join_hidden(
