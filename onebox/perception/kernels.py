@@ -687,7 +687,7 @@ def corner_cuts(
     spans; pixels differ in footprint across a top seen at a slant, spans do not). A cut
     counts when ``limits`` (narrowest part, part fill, fill gained) say so: both parts at
     least the narrowest part each way, each filling its rectangle, both by more than the
-    whole fills its own."""
+    whole fills its own; the best fills the two rectangles most, together."""
     min_part, part_fill, gain = limits[0], limits[1], limits[2]
     n = len(length)
     count = len(top)
@@ -763,11 +763,14 @@ def corner_cuts(
                 above_wide = back_high[s + 1] - back_low[s + 1] + step[k]
                 if min(below_long, above_long, below_wide, above_wide) < min_part:
                     continue
-                fill = min(
-                    run_held[s] * step[k] / (below_long * below_wide),
-                    back_held[s + 1] * step[k] / (above_long * above_wide),
+                below_area = below_long * below_wide
+                above_area = above_long * above_wide
+                worst = min(
+                    run_held[s] * step[k] / below_area, back_held[s + 1] * step[k] / above_area
                 )
-                if fill >= part_fill and fill >= whole_fill + gain and fill > best[k]:
+                # The two rectangles that hold the top best, together.
+                fill = (run_held[s] + back_held[s + 1]) * step[k] / (below_area + above_area)
+                if worst >= part_fill and worst >= whole_fill + gain and fill > best[k]:
                     best[k] = fill
                     cut[k] = True
                     cut_along[k] = direction == 0
