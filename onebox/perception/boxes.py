@@ -25,10 +25,10 @@ The pipeline, one module a physical effect:
      extent along that side is then a lower bound), a lower level, the picture's edge, and how
      much of its rectangle is not seen;
    - which tops are boxes (:func:`_boxes`): large enough, level, flat, not curved over their
-     middle half beyond its fitted sag's noise, filling their rectangle and its corners (of
-     what is seen, and a fifth of the rectangle at least; more than fill it is a surface
-     folding over itself), not cut off, not falling away on more than two sides past which
-     no face of their own is seen going down;
+     middle half or their middle 80 % beyond each fitted sag's noise, filling their rectangle
+     and its corners (of what is seen, and a fifth of the rectangle at least; more than fill
+     it is a surface folding over itself), not cut off, not falling away on more than two
+     sides past which no face of their own is seen going down;
    - what each top stands on (:func:`_bases`): the support or a lower top, looked for at its
      own height just past the top's sides, within where the top's faces are seen to end
      (:func:`_face_bottom`), or where they end on a box sticking out under them;
@@ -102,10 +102,14 @@ HIDDEN_SHARE = 0.3
 """A side is hidden when this share of its probes see something nearer than the top."""
 COVER_GRID = 9
 """Points across each side of a top's rectangle looked at for what hides it."""
-CURVED_SHARE = 0.06
+CURVED_SHARE = (0.06, 0.154)
 """A top whose middle half sags from its middle to that half's edges by more than this share
 of their distance is curved (a can lying down: about 0.06 and more; a carton's lid, bowed by
-a stereo camera, up to 0.05; its edges smeared by the camera, it stays flat in its middle)..."""
+a stereo camera, up to 0.05; its edges smeared by the camera, it stays flat in its middle);
+so is one whose middle 80 % sags by the second (the same curve over a window 1.6 times as
+wide, whose sag rises 2.56-fold, above its noise more surely)..."""
+CURVE_WINDOW_SHARE = np.array([0.5, 0.8])
+"""The share of a top's pixels in each window."""
 CURVED_SIGMAS = 3.0
 """...when the sag is also more than this many times its own noise: no curve is read into
 noise."""
@@ -473,11 +477,12 @@ def _boxes(
     fill_needed = np.maximum(settings.min_score * (1.0 - round_.covered), MIN_SEEN)
     corners_needed = CORNER_FILL * (1.0 - round_.corners_covered)
     flat = tops.rms_m <= np.maximum(FLAT_SIGMAS * tops.sigma_m, FLAT_M)
-    # The sag is fitted to the middle half's pixels: its noise falls with the root of how
-    # many independent lumps of noise that half holds, down to a share of sigma(z) (depth
-    # errors keep some structure across a top that no count of pixels averages out).
-    lumps = np.maximum(0.5 * tops.pixels / max(lump_px, 1.0) ** 2, 1.0)
-    sag_noise = np.clip(SAG_SPREAD / np.sqrt(lumps), SAG_FLOOR, 1.0) * tops.sigma_m
+    # Each sag is fitted to its window's pixels: its noise falls with the root of how many
+    # independent lumps of noise the window holds, down to a share of sigma(z) (depth errors
+    # keep some structure across a top that no count of pixels averages out).
+    lumps = np.maximum(CURVE_WINDOW_SHARE * tops.pixels[:, None] / max(lump_px, 1.0) ** 2, 1.0)
+    sag_noise = np.clip(SAG_SPREAD / np.sqrt(lumps), SAG_FLOOR, 1.0) * tops.sigma_m[:, None]
+    curved = (tops.sag_share > np.array(CURVED_SHARE)) & (tops.sag_m > CURVED_SIGMAS * sag_noise)
     result: BoolArray = (
         (tops.area_m2 >= settings.min_top_area_m2)
         & (tops.width_m >= MIN_WIDTH_M)
@@ -487,7 +492,7 @@ def _boxes(
         & (tops.fill <= MAX_FILL)
         & (tops.corners >= corners_needed)
         & ((round_.sloping & ~faces).sum(axis=1) <= 2)
-        & ~((tops.sag_share > CURVED_SHARE) & (tops.sag_m > CURVED_SIGMAS * sag_noise))
+        & ~curved.any(axis=1)
     )
     if not settings.keep_cut_off:
         result &= ~tops.on_border

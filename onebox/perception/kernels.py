@@ -255,8 +255,9 @@ def measure_tops(
     over its pixels in order, as ``np.bincount`` would add them.
 
     Returns per top (n): pixels, mean depth, mean sigma, height at the rectangle's middle,
-    middle (n, 2), axis (n, 2), length, width, area, fill, corners, rms, sag, sag share,
-    tilt (degrees), slope (n, 2) and the points' mean a, b and h (n, 3), as
+    middle (n, 2), axis (n, 2), length, width, area, fill, corners, rms, sag and sag share
+    (n, 2: over the middle half, over the middle 80 %), tilt (degrees), slope (n, 2) and the
+    points' mean a, b and h (n, 3), as
     :class:`onebox.perception.tops.Tops` holds them."""
     n = len(start) - 1
     # The outline's points, top by top, for the rectangle's angle.
@@ -288,8 +289,8 @@ def measure_tops(
     fill = np.zeros(n)
     corners = np.zeros(n)
     rms = np.zeros(n)
-    sag = np.zeros(n)
-    sag_share = np.zeros(n)
+    sag = np.zeros((n, 2))
+    sag_share = np.zeros((n, 2))
     tilt = np.zeros(n)
     slope = np.zeros((n, 2))
     centroid = np.zeros((n, 3))
@@ -386,51 +387,59 @@ def measure_tops(
         stretched_p = extent_p * math.hypot(1.0, alpha * cos + beta * sin)
         stretched_q = extent_q * math.hypot(1.0, beta * cos - alpha * sin)
         # How the top curves off its plane along each axis: the residuals' quadratic part over
-        # the middle half of the top, as the sag from its middle to that half's edges.
+        # a window round its middle, as the sag from its middle to the window's edges; two
+        # windows, the middle half and the middle 80 % (less three pixels at each edge, which
+        # a camera smears).
         # (Both axes in the same passes, each with its own sums in order.)
-        quarter_p, quarter_q = stretched_p / 4, stretched_q / 4
-        count_p = inner_square_p = inner_residual_p = 0.0
-        count_q = inner_square_q = inner_residual_q = 0.0
-        for i in range(lo, hi):
-            offset_p = p[i] - mid_p
-            offset_q = q[i] - mid_q
-            if abs(offset_p) < quarter_p:
-                count_p += 1.0
-                inner_square_p += offset_p * offset_p
-                inner_residual_p += residual[i]
-            if abs(offset_q) < quarter_q:
-                count_q += 1.0
-                inner_square_q += offset_q * offset_q
-                inner_residual_q += residual[i]
-        count_p = max(count_p, 1.0)
-        count_q = max(count_q, 1.0)
-        inner_square_p /= count_p
-        inner_residual_p /= count_p
-        inner_square_q /= count_q
-        inner_residual_q /= count_q
-        spread_p = curved_p = spread_q = curved_q = 0.0
-        for i in range(lo, hi):
-            offset_p = p[i] - mid_p
-            offset_q = q[i] - mid_q
-            if abs(offset_p) < quarter_p:
-                centred = offset_p * offset_p - inner_square_p
-                curved_p += centred * (residual[i] - inner_residual_p)
-                spread_p += centred * centred
-            if abs(offset_q) < quarter_q:
-                centred = offset_q * offset_q - inner_square_q
-                curved_q += centred * (residual[i] - inner_residual_q)
-                spread_q += centred * centred
-        for direction in range(2):
-            extent = stretched_p if direction == 0 else stretched_q
-            count = count_p if direction == 0 else count_q
-            curved = curved_p if direction == 0 else curved_q
-            spread = spread_p if direction == 0 else spread_q
-            curve = (curved / count) / max(spread / count, 1e-18)
-            this = abs(curve) * (extent / 4) ** 2
-            share = this / max(extent / 2, 1e-9)
-            if share > sag_share[k]:
-                sag[k] = this
-            sag_share[k] = max(sag_share[k], share)
+        for w in range(2):
+            if w == 0:
+                quarter_p, quarter_q = stretched_p / 4, stretched_q / 4
+            else:
+                quarter_p = min(stretched_p * 0.4, stretched_p * 0.5 - 3.0 * step)
+                quarter_q = min(stretched_q * 0.4, stretched_q * 0.5 - 3.0 * step)
+            count_p = inner_square_p = inner_residual_p = 0.0
+            count_q = inner_square_q = inner_residual_q = 0.0
+            for i in range(lo, hi):
+                offset_p = p[i] - mid_p
+                offset_q = q[i] - mid_q
+                if abs(offset_p) < quarter_p:
+                    count_p += 1.0
+                    inner_square_p += offset_p * offset_p
+                    inner_residual_p += residual[i]
+                if abs(offset_q) < quarter_q:
+                    count_q += 1.0
+                    inner_square_q += offset_q * offset_q
+                    inner_residual_q += residual[i]
+            count_p = max(count_p, 1.0)
+            count_q = max(count_q, 1.0)
+            inner_square_p /= count_p
+            inner_residual_p /= count_p
+            inner_square_q /= count_q
+            inner_residual_q /= count_q
+            spread_p = curved_p = spread_q = curved_q = 0.0
+            for i in range(lo, hi):
+                offset_p = p[i] - mid_p
+                offset_q = q[i] - mid_q
+                if abs(offset_p) < quarter_p:
+                    centred = offset_p * offset_p - inner_square_p
+                    curved_p += centred * (residual[i] - inner_residual_p)
+                    spread_p += centred * centred
+                if abs(offset_q) < quarter_q:
+                    centred = offset_q * offset_q - inner_square_q
+                    curved_q += centred * (residual[i] - inner_residual_q)
+                    spread_q += centred * centred
+            for direction in range(2):
+                extent = stretched_p if direction == 0 else stretched_q
+                window = quarter_p if direction == 0 else quarter_q
+                count = count_p if direction == 0 else count_q
+                curved = curved_p if direction == 0 else curved_q
+                spread = spread_p if direction == 0 else spread_q
+                curve = (curved / count) / max(spread / count, 1e-18)
+                this = abs(curve) * max(window, 0.0) ** 2
+                share = this / max(extent / 2, 1e-9)
+                if share > sag_share[k, w]:
+                    sag[k, w] = this
+                sag_share[k, w] = max(sag_share[k, w], share)
         middle[k, 0] = mid_p * cos - mid_q * sin
         middle[k, 1] = mid_p * sin + mid_q * cos
         if extent_p >= extent_q:

@@ -32,7 +32,7 @@ How:
    is smallest; the extent along each axis taken over the pixels whose cross-section is at
    least ``PROFILE_SHARE`` of a typical one, so a ragged or smeared edge's stray pixels do not
    stretch it), its area (each pixel's footprint on the plane), how full its rectangle and its
-   corners are, how flat it is and how its middle half curves.
+   corners are, how flat it is and how its middle half and its middle 80 % curve.
 """
 
 from __future__ import annotations
@@ -119,9 +119,10 @@ class Tops:
     rms_m: Float64Array
     """How far the top's points lie off its plane (root mean square)."""
     sag_m: Float64Array
-    """How far the top curves from its middle to its edges, along the axis it curves more..."""
+    """(n, 2): how far the top curves from its middle to the edges of a window round it, along
+    the axis it curves more: the middle half, the middle 80 % (less three pixels each side)..."""
     sag_share: Float64Array
-    """...and that over its extent along that axis."""
+    """...and that over half its extent along that axis."""
     tilt_deg: Float64Array
     """The top plane's angle to the support."""
     slope_ab: Float64Array
