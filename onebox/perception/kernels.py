@@ -395,8 +395,14 @@ def measure_tops(
             if w == 0:
                 quarter_p, quarter_q = stretched_p / 4, stretched_q / 4
             else:
-                quarter_p = min(stretched_p * 0.4, stretched_p * 0.5 - 3.0 * step)
-                quarter_q = min(stretched_q * 0.4, stretched_q * 0.5 - 3.0 * step)
+                # (never narrower than the middle half: a top a few pixels across has no
+                # wider window to fit)
+                quarter_p = max(
+                    min(stretched_p * 0.4, stretched_p * 0.5 - 3.0 * step), stretched_p / 4
+                )
+                quarter_q = max(
+                    min(stretched_q * 0.4, stretched_q * 0.5 - 3.0 * step), stretched_q / 4
+                )
             count_p = inner_square_p = inner_residual_p = 0.0
             count_q = inner_square_q = inner_residual_q = 0.0
             for i in range(lo, hi):
