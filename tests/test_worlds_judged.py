@@ -6,6 +6,7 @@ then seen as a strip."""
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,6 +15,7 @@ from onebox.geometry import Intrinsics
 from onebox.perception.boxes import Box, FinderSettings, Found
 from onebox.perception.stream import BoxFinder
 from onebox.testing.judged import Judged, Rendered, judge, render_scene
+from onebox.world import spec
 from onebox.world.noise import PRESETS
 from onebox.world.random_scene import looking_across, random_pallet, random_scene
 from onebox.world.spec import BoxDesc, CameraDesc, ObjectDesc, SceneDesc, TableDesc
@@ -438,6 +440,24 @@ def test_cartons_touching_in_rows_through_d435_not_on_their_faces():
     assert judged.missed == 0 and judged.false == 0, judged.notes
     assert judged.found + judged.hidden_found == 9, judged.notes
     assert max(judged.height_mm + judged.hidden_height_mm) <= 2.0, judged.notes
+
+
+@pytest.mark.parametrize("noise", ["d435", "azure_kinect"])
+def test_a_pallets_rim_in_front_of_its_load_is_no_box(noise):
+    """pallet.toml: 5 cm of the pallet's top shows in front of the near row, a strip 1.2 m long
+    with no reading along its back edge (the depth camera's hole at the cartons' faces) and the
+    cartons standing on it past that edge. It is the pallet's top going on under them, not a
+    box: no box is reported at the pallet's height."""
+    scene = spec.load(Path(__file__).resolve().parent.parent / "scene" / "pallet.toml")
+    rendered = render_scene(scene, PRESETS[noise])
+    found = BoxFinder(FinderSettings())(
+        rendered.depth_m, rendered.lens, rendered.camera_to_world, rendered.rgb
+    )
+    pallet_top = scene.boxes[0].size[2]
+    assert found.boxes, "the cartons are found"
+    assert all(abs(box.top_middle[2] - pallet_top) > 0.02 for box in found.boxes), [
+        (box.top_middle, box.size) for box in found.boxes
+    ]
 
 
 def test_random_pallet_is_the_same_for_a_seed():

@@ -34,7 +34,8 @@ The pipeline, one module a physical effect:
      (:func:`_face_bottom`), or where they end on a box sticking out under them;
    - what is no box after all: a top with nothing under its edges (:func:`_hollow`, a table on
      legs) and a platform (a top two boxes or more stand on that they mostly hide, or that
-     they stand on past one hidden side of it: a pallet's top and rim);
+     they stand on past one side of it that something hides or no reading shows: a pallet's
+     top and rim);
    - the report, with a catalogue's height and name where a top fits an entry.
 """
 
@@ -291,7 +292,8 @@ def find_boxes(
     is_box &= ~_hollow(tops, looked, base, depth, lens, support)
     carried = is_box & (on >= 0)
     carries = np.bincount(on[carried], minlength=len(tops)) >= PLATFORM_CARRIES
-    # ... boxes standing on it outside its rectangle stand past a hidden side of it, the same
+    # ... boxes standing on it outside its rectangle stand past a side of it that something
+    # hides or no reading shows (a stereo camera's hole along the faces rising there), the same
     # side (a pallet's rim before its load; taller neighbours either side of a carton are not)
     under = on[carried]
     d = tops.middle_ab[carried] - tops.middle_ab[under]
@@ -303,7 +305,8 @@ def find_boxes(
     side = np.where(
         beyond_length > beyond_width, np.where(along > 0, 0, 1), np.where(across > 0, 2, 3)
     )
-    outside = (np.maximum(beyond_length, beyond_width) > 0) & round_.hidden[under, side]
+    past_side = round_.hidden[under, side] | round_.unread[under, side]
+    outside = (np.maximum(beyond_length, beyond_width) > 0) & past_side
     past = np.zeros((len(tops), 4), dtype=np.int64)
     np.add.at(past, (under[outside], side[outside]), 1)
     platform = carries & ((round_.covered >= PLATFORM_COVERED) | (past.max(axis=1) >= 2))
@@ -365,6 +368,9 @@ class Round:
 
     hidden: BoolArray
     """Something nearer than the top hides the side."""
+    unread: BoolArray
+    """No reading past the side (a stereo camera's hole along a depth edge): what it does
+    there is not seen either."""
     lower_m: Float64Array
     """(n, 4, PROBES_PER_SIDE): the height seen past the side where it is lower than the top
     (NaN where not)."""
@@ -423,6 +429,7 @@ def _look_round(
         seen_height += support.offset_camera_m  # height along the same ray, by similar triangles
         lower = np.where(seen > z_expected + tolerance, seen_height, np.nan)
     hidden = nearer.mean(axis=2) >= HIDDEN_SHARE
+    unread = (np.isnan(seen) & inside).mean(axis=2) >= HIDDEN_SHARE
     covered, corners_covered = _covered(tops, depth_m, lens, support)
     # A lower surface at no level (neither the support nor any top) is the object going on
     # down past its top: a box's own side face seen at a slant, or a curved or ragged body.
@@ -435,7 +442,7 @@ def _look_round(
     seen_top = np.where(
         in_crop, tops.labels[np.clip(vc, 0, rows - 1), np.clip(uc, 0, cols - 1)] - 1, -1
     )
-    return Round(hidden, lower, sloping, seen_top, ab, covered, corners_covered)
+    return Round(hidden, unread, lower, sloping, seen_top, ab, covered, corners_covered)
 
 
 def _lens_array(lens: Intrinsics) -> Float64Array:
