@@ -494,6 +494,33 @@ def _mean_run(
     return float((run_sum[upto] - before_sum) / max(run_count[upto] - before_count, 1.0))
 
 
+@numba.njit(cache=True, nogil=True)
+def _rectangle_axes(
+    top: IntArray,
+    a: Float64Array,
+    b: Float64Array,
+    middle_ab: Float64Array,
+    axis_ab: Float64Array,
+    area: Float64Array,
+    pixels: IntArray,
+) -> tuple[Float64Array, Float64Array, Float64Array]:
+    """Each top pixel's offset from its top's middle along the rectangle's length and across
+    it, and each top's pixel side (the root of its mean footprint)."""
+    count = len(top)
+    along = np.empty(count)
+    across = np.empty(count)
+    for i in range(count):
+        k = top[i]
+        da = a[i] - middle_ab[k, 0]
+        db = b[i] - middle_ab[k, 1]
+        along[i] = da * axis_ab[k, 0] + db * axis_ab[k, 1]
+        across[i] = db * axis_ab[k, 0] - da * axis_ab[k, 1]
+    step = np.empty(len(pixels))
+    for k in range(len(pixels)):
+        step[k] = math.sqrt(max(area[k] / max(pixels[k], 1), 1e-12))
+    return along, across, step
+
+
 SEAM_AROUND = (4, 10)
 """Slots (pixels) either side of a seam whose print it is compared with: from, to."""
 SEAM_FULL = 0.5
@@ -534,22 +561,15 @@ def seam_cuts(
     count = len(top)
     on_seam = np.empty(count)
     shade = np.empty(count)
-    along = np.empty(count)
-    across = np.empty(count)
     print_share = np.zeros(n)
     for i in range(count):
         k = top[i]
         on_seam[i] = 1.0 if seam[index[i]] else 0.0
         shade[i] = float(grey[index[i]])
-        da = a[i] - middle_ab[k, 0]
-        db = b[i] - middle_ab[k, 1]
-        along[i] = da * axis_ab[k, 0] + db * axis_ab[k, 1]
-        across[i] = db * axis_ab[k, 0] - da * axis_ab[k, 1]
         print_share[k] += on_seam[i]
-    step = np.empty(n)
+    along, across, step = _rectangle_axes(top, a, b, middle_ab, axis_ab, area, pixels)
     for k in range(n):
         print_share[k] /= max(pixels[k], 1)
-        step[k] = math.sqrt(max(area[k] / max(pixels[k], 1), 1e-12))
     cut = np.zeros(n, dtype=np.bool_)
     cut_along = np.zeros(n, dtype=np.bool_)
     cut_at = np.zeros(n)
@@ -705,18 +725,7 @@ def corner_cuts(
     whole fills its own; the best fills the two rectangles most, together."""
     min_part, part_fill, gain = limits[0], limits[1], limits[2]
     n = len(length)
-    count = len(top)
-    along = np.empty(count)
-    across = np.empty(count)
-    for i in range(count):
-        k = top[i]
-        da = a[i] - middle_ab[k, 0]
-        db = b[i] - middle_ab[k, 1]
-        along[i] = da * axis_ab[k, 0] + db * axis_ab[k, 1]
-        across[i] = db * axis_ab[k, 0] - da * axis_ab[k, 1]
-    step = np.empty(n)
-    for k in range(n):
-        step[k] = math.sqrt(max(area[k] / max(pixels[k], 1), 1e-12))
+    along, across, step = _rectangle_axes(top, a, b, middle_ab, axis_ab, area, pixels)
     cut = np.zeros(n, dtype=np.bool_)
     cut_along = np.zeros(n, dtype=np.bool_)
     cut_at = np.zeros(n)
@@ -734,7 +743,7 @@ def corner_cuts(
         held = np.zeros(total)
         low = np.full(total, np.inf)
         high = np.full(total, -np.inf)
-        for i in range(count):
+        for i in range(len(top)):
             k = top[i]
             if not wanted[k]:
                 continue
