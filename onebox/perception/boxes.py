@@ -111,9 +111,10 @@ so is one whose middle 80 % sags by the second (the same curve over a window 1.6
 wide, whose sag rises 2.56-fold, above its noise more surely)..."""
 CURVE_WINDOW_SHARE = np.array([0.5, 0.8])
 """The share of a top's pixels in each window."""
-CURVED_SIGMAS = 3.0
-"""...when the sag is also more than this many times its own noise: no curve is read into
-noise."""
+CURVED_SIGMAS = (3.0, 5.0)
+"""...when the sag is also more than this many times its own noise (the middle half's, the
+middle 80 %'s): no curve is read into noise. Nearer a top's edges a stereo camera's errors
+are less like noise (lumps, steps, smear), so the wider window asks more."""
 SAG_SPREAD = 3.35
 """A quadratic fitted to N points spread evenly over [-a, a] has its rise over a known to
 sigma * 3.35 / sqrt(N)..."""
@@ -489,7 +490,9 @@ def _boxes(
     # keep some structure across a top that no count of pixels averages out).
     lumps = np.maximum(CURVE_WINDOW_SHARE * tops.pixels[:, None] / max(lump_px, 1.0) ** 2, 1.0)
     sag_noise = np.clip(SAG_SPREAD / np.sqrt(lumps), SAG_FLOOR, 1.0) * tops.sigma_m[:, None]
-    curved = (tops.sag_share > np.array(CURVED_SHARE)) & (tops.sag_m > CURVED_SIGMAS * sag_noise)
+    curved = (tops.sag_share > np.array(CURVED_SHARE)) & (
+        tops.sag_m > np.array(CURVED_SIGMAS) * sag_noise
+    )
     result: BoolArray = (
         (tops.area_m2 >= settings.min_top_area_m2)
         & (tops.width_m >= MIN_WIDTH_M)
