@@ -71,9 +71,9 @@ BORDER_PX = 3
 """A top this close to the picture's edge may go on past it (its edge pixels smeared or cut at
 a step)..."""
 ALONG_BORDER_PX = 12
-"""...when it runs along the edge for more than this many pixels: cut off, its extent unknown.
-A corner that only touches the edge spans 6-9 pixels of that band (sides at 45-20 degrees to
-it); the rectangle then loses a pixel or two at most."""
+"""...when it runs along the edge for this many pixels or more: cut off, its extent unknown. A
+corner that only grazes the edge spans fewer: both sides beside it are still seen, and the
+rectangle placed on them keeps its size."""
 CORNERED_FILL = 0.9
 """A top filling less of its rectangle than this may be two tops side by side at one height
 (no step, no seam between them: their outline turns inward where they meet)..."""
@@ -250,10 +250,9 @@ def split_at_corners(
     k = np.flatnonzero(cut)
     # Points across each cut top's rectangle, in (along the cut's axis, across it).
     share = (np.arange(NOTCH_GRID) + 0.5) / NOTCH_GRID - 0.5
-    long_ = np.where(cut_along[k], tops.length_m[k], tops.width_m[k])
-    wide = np.where(cut_along[k], tops.width_m[k], tops.length_m[k])
-    u = share[None, :, None] * long_[:, None, None] + 0.0 * share[None, None, :]
-    v = share[None, None, :] * wide[:, None, None] + 0.0 * share[None, :, None]
+    grid_u, grid_v = np.meshgrid(share, share, indexing="ij")
+    u = grid_u * np.where(cut_along[k], tops.length_m[k], tops.width_m[k])[:, None, None]
+    v = grid_v * np.where(cut_along[k], tops.width_m[k], tops.length_m[k])[:, None, None]
     step = np.sqrt(tops.area_m2[k] / np.maximum(tops.pixels[k], 1))[:, None, None]
     p = parts[k][:, None, None, :]
     inside = (
