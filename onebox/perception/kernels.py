@@ -494,6 +494,24 @@ def _mean_run(
     return float((run_sum[upto] - before_sum) / max(run_count[upto] - before_count, 1.0))
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _offsets(
+    a: Float64Array,
+    b: Float64Array,
+    middle_ab: Float64Array,
+    axis_ab: Float64Array,
+    k: int,
+    i: int,
+    along: Float64Array,
+    across: Float64Array,
+) -> None:
+    """Pixel ``i``'s offset from top ``k``'s middle along its rectangle's length and across."""
+    da = a[i] - middle_ab[k, 0]
+    db = b[i] - middle_ab[k, 1]
+    along[i] = da * axis_ab[k, 0] + db * axis_ab[k, 1]
+    across[i] = db * axis_ab[k, 0] - da * axis_ab[k, 1]
+
+
 @numba.njit(cache=True, nogil=True)
 def _rectangle_axes(
     top: IntArray,
@@ -503,18 +521,21 @@ def _rectangle_axes(
     axis_ab: Float64Array,
     area: Float64Array,
     pixels: IntArray,
+    wanted: npt.NDArray[np.bool_],
 ) -> tuple[Float64Array, Float64Array, Float64Array]:
-    """Each top pixel's offset from its top's middle along the rectangle's length and across
-    it, and each top's pixel side (the root of its mean footprint)."""
+    """Each ``wanted`` top's pixels' offsets from its middle along its rectangle's length and
+    across it (the others' are left unset), and each top's pixel side (the root of its mean
+    footprint). The pixels come top by top, ``pixels`` of each."""
     count = len(top)
     along = np.empty(count)
     across = np.empty(count)
-    for i in range(count):
-        k = top[i]
-        da = a[i] - middle_ab[k, 0]
-        db = b[i] - middle_ab[k, 1]
-        along[i] = da * axis_ab[k, 0] + db * axis_ab[k, 1]
-        across[i] = db * axis_ab[k, 0] - da * axis_ab[k, 1]
+    first = 0
+    for k in range(len(pixels)):
+        last = first + pixels[k]
+        if wanted[k]:
+            for i in range(first, last):
+                _offsets(a, b, middle_ab, axis_ab, k, i, along, across)
+        first = last
     step = np.empty(len(pixels))
     for k in range(len(pixels)):
         step[k] = math.sqrt(max(area[k] / max(pixels[k], 1), 1e-12))
@@ -567,7 +588,8 @@ def seam_cuts(
         on_seam[i] = 1.0 if seam[index[i]] else 0.0
         shade[i] = float(grey[index[i]])
         print_share[k] += on_seam[i]
-    along, across, step = _rectangle_axes(top, a, b, middle_ab, axis_ab, area, pixels)
+    every = np.ones(n, dtype=np.bool_)
+    along, across, step = _rectangle_axes(top, a, b, middle_ab, axis_ab, area, pixels, every)
     for k in range(n):
         print_share[k] /= max(pixels[k], 1)
     cut = np.zeros(n, dtype=np.bool_)
@@ -725,7 +747,10 @@ def corner_cuts(
     whole fills its own; the best fills the two rectangles most, together."""
     min_part, part_fill, gain = limits[0], limits[1], limits[2]
     n = len(length)
-    along, across, step = _rectangle_axes(top, a, b, middle_ab, axis_ab, area, pixels)
+    along, across, step = _rectangle_axes(top, a, b, middle_ab, axis_ab, area, pixels, wanted)
+    begin = np.zeros(n + 1, dtype=np.int64)
+    for k in range(n):
+        begin[k + 1] = begin[k] + pixels[k]
     cut = np.zeros(n, dtype=np.bool_)
     cut_along = np.zeros(n, dtype=np.bool_)
     cut_at = np.zeros(n)
@@ -743,15 +768,15 @@ def corner_cuts(
         held = np.zeros(total)
         low = np.full(total, np.inf)
         high = np.full(total, -np.inf)
-        for i in range(len(top)):
-            k = top[i]
+        for k in range(n):
             if not wanted[k]:
                 continue
-            bins = int(np.floor((coordinate[i] + 0.5 * extent[k]) / step[k])) + 1
-            s = offset[k] + min(max(bins, 0), offset[k + 1] - offset[k] - 1)
-            held[s] += 1.0
-            low[s] = min(low[s], other[i])
-            high[s] = max(high[s], other[i])
+            for i in range(begin[k], begin[k + 1]):
+                bins = int(np.floor((coordinate[i] + 0.5 * extent[k]) / step[k])) + 1
+                s = offset[k] + min(max(bins, 0), offset[k + 1] - offset[k] - 1)
+                held[s] += 1.0
+                low[s] = min(low[s], other[i])
+                high[s] = max(high[s], other[i])
         # Running from either end of each top: spans, extent across.
         run_held = np.empty(total)
         run_low = np.empty(total)
@@ -1339,6 +1364,40 @@ def standing(
 
 
 @numba.njit(cache=True, nogil=True)
+def border_spans(labels: IntArray, band: int, n: int) -> npt.NDArray[np.intp]:
+    """For each of the ``n`` labels, how far along the picture's edge its pixels within
+    ``band`` of it reach, on the edge where that is farthest (last minus first position
+    along it; -1 where it does not come that close)."""
+    rows, cols = labels.shape
+    band_rows, band_cols = min(band, rows), min(band, cols)
+    span = np.full(n, -1, dtype=np.intp)
+    low = np.empty(n + 1, dtype=np.intp)
+    high = np.empty(n + 1, dtype=np.intp)
+    for edge in range(4):
+        low[:] = rows + cols
+        high[:] = -1
+        across = band_rows if edge < 2 else band_cols
+        along = cols if edge < 2 else rows
+        for d in range(across):
+            for t in range(along):
+                if edge == 0:
+                    label = labels[d, t]
+                elif edge == 1:
+                    label = labels[rows - 1 - d, t]
+                elif edge == 2:
+                    label = labels[t, d]
+                else:
+                    label = labels[t, cols - 1 - d]
+                if label > 0:
+                    low[label] = min(low[label], t)
+                    high[label] = max(high[label], t)
+        for k in range(n):
+            if high[k + 1] >= 0:
+                span[k] = max(span[k], high[k + 1] - low[k + 1])
+    return span
+
+
+@numba.njit(cache=True, nogil=True)
 def _label_sizes(labels: IntArray) -> npt.NDArray[np.intp]:
     """How many pixels hold each label, 0 to the largest (0: no region). Counted in four
     tallies, by column, summed after: a run of one label does not wait on its own count from
@@ -1613,6 +1672,7 @@ def warm_up() -> None:
     top_points(grid, flat, flat, flat, flat[0], flat[0], np.eye(3))
     standing(flat, flat, one.reshape(1, 2), one.reshape(1, 2), 0.01, np.inf)
     drop_small(grid, 2)
+    border_spans(grid, 3, 1)
     standing_bounds(flat, flat, 1.0, 0.01)
     grey = np.zeros((2, 2), dtype=np.uint8)
     laplacian_counts(grey)

@@ -508,17 +508,8 @@ def _measure(
 def _on_border(labels: IntArray, n: int) -> BoolArray:
     """Which of the ``n`` tops run along the picture's edge (``ALONG_BORDER_PX`` or more within
     ``BORDER_PX`` of it): their extent past it is unknown."""
-    band = BORDER_PX
-    cut = np.zeros(n + 1, dtype=bool)
-    for strip in (labels[:band], labels[-band:], labels[:, :band].T, labels[:, -band:].T):
-        low = np.full(n + 1, labels.size, dtype=np.intp)
-        high = np.full(n + 1, -1, dtype=np.intp)
-        _, along = np.nonzero(strip)
-        top = strip[strip > 0]
-        np.minimum.at(low, top, along)
-        np.maximum.at(high, top, along)
-        cut |= high - low >= ALONG_BORDER_PX
-    return cut[1:]
+    on_border: BoolArray = kernels.border_spans(labels, BORDER_PX, n) >= ALONG_BORDER_PX
+    return on_border
 
 
 def _kept(before: Tops, labels: IntArray, start: npt.NDArray[np.intp]) -> npt.NDArray[np.intp]:
