@@ -206,11 +206,12 @@ def find_tops(
     joined = join_hidden(tops, depth_m, lens, support)
     if joined is not None:
         tops = _measure(joined, depth_m, surface, lens, basis, tops)
-    for _ in range(SEAM_ROUNDS if seam is not None else 0):
-        split = seams.split_at_seams(tops, seam[0], seam[1])
-        if split is None:
-            break
-        tops = _measure(split, depth_m, surface, lens, basis, tops)
+    if seam is not None:
+        for _ in range(SEAM_ROUNDS):
+            split = seams.split_at_seams(tops, seam[0], seam[1])
+            if split is None:
+                break
+            tops = _measure(split, depth_m, surface, lens, basis, tops)
     for _ in range(CORNER_ROUNDS):
         split = split_at_corners(tops, depth_m, lens, support)
         if split is None:
