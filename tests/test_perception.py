@@ -692,10 +692,10 @@ def test_a_turned_boxs_top_is_measured_as_its_rectangle():
 
 @pytest.mark.parametrize(("distance_m", "tilt"), [(1.2, 0.0), (1.5, 0.0), (1.5, 20.0)])
 def test_a_tin_lying_down_is_no_box_through_a_stereo_cameras_noise(distance_m, tilt):
-    """A tin 10 cm across lying down, 1.2-1.5 m away through a D435's noise (sigma 4-5 mm),
-    five pictures: no box. Its top (7 cm of it) sags 7-9 mm over its middle 80 %, clear of that
-    window's noise, and only 3 mm over its middle half, within it. A carton of its size in the
-    same place: a box in each."""
+    """A tin 10 cm across lying down, 1.2-1.5 m away through a D435's noise (sigma 3.6-5.1 mm
+    there), five pictures: no box. Its top (7 cm of it) sags 7-9 mm over its middle 80 %,
+    clear of that window's noise, and only 3 mm over its middle half, within it. A carton of
+    its size in the same place: a box in each."""
     camera = tilted(distance_m, tilt)
     tin = lying(0.0, 0.0, 0.05, 0.16, 30.0)
     carton = box_on(P, 0.0, 0.0, (0.16, 0.08, 0.1), 30.0, (170, 130, 80))
