@@ -778,33 +778,33 @@ def corner_cuts(
                 low[s] = min(low[s], other[i])
                 high[s] = max(high[s], other[i])
         # Running from either end of each top: spans, extent across.
-        run_held = np.empty(total)
+        run_span = np.empty(total)
         run_low = np.empty(total)
         run_high = np.empty(total)
-        back_held = np.empty(total)
+        back_span = np.empty(total)
         back_low = np.empty(total)
         back_high = np.empty(total)
         for k in range(n):
             first, last = offset[k], offset[k + 1] - 1
             if last <= first:
                 continue
-            held_so_far, lo, hi = 0.0, np.inf, -np.inf
+            spans, lo, hi = 0.0, np.inf, -np.inf
             for s in range(first, last + 1):
-                held_so_far += high[s] - low[s] + step[k] if held[s] > 0 else 0.0
+                spans += high[s] - low[s] + step[k] if held[s] > 0 else 0.0
                 lo, hi = min(lo, low[s]), max(hi, high[s])
-                run_held[s], run_low[s], run_high[s] = held_so_far, lo, hi
-            held_so_far, lo, hi = 0.0, np.inf, -np.inf
+                run_span[s], run_low[s], run_high[s] = spans, lo, hi
+            spans, lo, hi = 0.0, np.inf, -np.inf
             for s in range(last, first - 1, -1):
-                held_so_far += high[s] - low[s] + step[k] if held[s] > 0 else 0.0
+                spans += high[s] - low[s] + step[k] if held[s] > 0 else 0.0
                 lo, hi = min(lo, low[s]), max(hi, high[s])
-                back_held[s], back_low[s], back_high[s] = held_so_far, lo, hi
+                back_span[s], back_low[s], back_high[s] = spans, lo, hi
             start, end = first, last
             while start < last and held[start] == 0.0:
                 start += 1
             while end > first and held[end] == 0.0:
                 end -= 1
             whole = (end - start + 1) * (run_high[last] - run_low[last] + step[k])
-            whole_fill = run_held[last] / max(whole, 1e-12)
+            whole_fill = run_span[last] / max(whole, 1e-12)
             for s in range(start, end):
                 below_long = (s - start + 1) * step[k]
                 above_long = (end - s) * step[k]
@@ -815,10 +815,10 @@ def corner_cuts(
                 below_area = below_long * below_wide
                 above_area = above_long * above_wide
                 worst = min(
-                    run_held[s] * step[k] / below_area, back_held[s + 1] * step[k] / above_area
+                    run_span[s] * step[k] / below_area, back_span[s + 1] * step[k] / above_area
                 )
                 # The two rectangles that hold the top best, together.
-                fill = (run_held[s] + back_held[s + 1]) * step[k] / (below_area + above_area)
+                fill = (run_span[s] + back_span[s + 1]) * step[k] / (below_area + above_area)
                 if worst >= part_fill and worst >= whole_fill + gain and fill > best[k]:
                     best[k] = fill
                     cut[k] = True
