@@ -135,7 +135,8 @@ class Tops:
     """The depth noise at that distance."""
     pixels: IntArray
     on_border: BoolArray
-    """Comes within ``BORDER_PX`` of the picture's edge: cut off, its extent unknown."""
+    """Runs along the picture's edge (``ALONG_BORDER_PX`` within ``BORDER_PX`` of it): cut off,
+    its extent unknown."""
     basis: Float64Array
     """(3, 3): e1, e2 and the support normal, rows, in the optical frame."""
     points: Points
