@@ -103,7 +103,7 @@ HIDDEN_SHARE = 0.3
 """A side is hidden when this share of its probes see something nearer than the top."""
 COVER_GRID = 9
 """Points across each side of a top's rectangle looked at for what hides it."""
-CURVED_SHARE = (0.06, 0.154)
+CURVED_SHARE = np.array([0.06, 0.154])
 """A top whose middle half sags from its middle to that half's edges by more than this share
 of their distance is curved (a can lying down: about 0.06 and more; a carton's lid, bowed by
 a stereo camera, up to 0.05; its edges smeared by the camera, it stays flat in its middle);
@@ -111,7 +111,7 @@ so is one whose middle 80 % sags by the second (the same curve over a window 1.6
 wide, whose sag rises 2.56-fold, above its noise more surely)..."""
 CURVE_WINDOW_SHARE = np.array([0.5, 0.8])
 """The share of a top's pixels in each window."""
-CURVED_SIGMAS = (3.0, 5.0)
+CURVED_SIGMAS = np.array([3.0, 5.0])
 """...when the sag is also more than this many times its own noise (the middle half's, the
 middle 80 %'s): no curve is read into noise. Nearer a top's edges a stereo camera's errors
 are less like noise (lumps, steps, smear), so the wider window asks more."""
@@ -490,9 +490,7 @@ def _boxes(
     # keep some structure across a top that no count of pixels averages out).
     lumps = np.maximum(CURVE_WINDOW_SHARE * tops.pixels[:, None] / max(lump_px, 1.0) ** 2, 1.0)
     sag_noise = np.clip(SAG_SPREAD / np.sqrt(lumps), SAG_FLOOR, 1.0) * tops.sigma_m[:, None]
-    curved = (tops.sag_share > np.array(CURVED_SHARE)) & (
-        tops.sag_m > np.array(CURVED_SIGMAS) * sag_noise
-    )
+    curved = (tops.sag_share > CURVED_SHARE) & (tops.sag_m > CURVED_SIGMAS * sag_noise)
     result: BoolArray = (
         (tops.area_m2 >= settings.min_top_area_m2)
         & (tops.width_m >= MIN_WIDTH_M)

@@ -514,7 +514,6 @@ def _offsets(
 
 @numba.njit(cache=True, nogil=True)
 def _rectangle_axes(
-    top: IntArray,
     a: Float64Array,
     b: Float64Array,
     middle_ab: Float64Array,
@@ -526,9 +525,8 @@ def _rectangle_axes(
     """Each ``wanted`` top's pixels' offsets from its middle along its rectangle's length and
     across it (the others' are left unset), and each top's pixel side (the root of its mean
     footprint). The pixels come top by top, ``pixels`` of each."""
-    count = len(top)
-    along = np.empty(count)
-    across = np.empty(count)
+    along = np.empty(len(a))
+    across = np.empty(len(a))
     first = 0
     for k in range(len(pixels)):
         last = first + pixels[k]
@@ -589,7 +587,7 @@ def seam_cuts(
         shade[i] = float(grey[index[i]])
         print_share[k] += on_seam[i]
     every = np.ones(n, dtype=np.bool_)
-    along, across, step = _rectangle_axes(top, a, b, middle_ab, axis_ab, area, pixels, every)
+    along, across, step = _rectangle_axes(a, b, middle_ab, axis_ab, area, pixels, every)
     for k in range(n):
         print_share[k] /= max(pixels[k], 1)
     cut = np.zeros(n, dtype=np.bool_)
@@ -747,7 +745,7 @@ def corner_cuts(
     whole fills its own; the best fills the two rectangles most, together."""
     min_part, part_fill, gain = limits[0], limits[1], limits[2]
     n = len(length)
-    along, across, step = _rectangle_axes(top, a, b, middle_ab, axis_ab, area, pixels, wanted)
+    along, across, step = _rectangle_axes(a, b, middle_ab, axis_ab, area, pixels, wanted)
     begin = np.zeros(n + 1, dtype=np.int64)
     for k in range(n):
         begin[k + 1] = begin[k] + pixels[k]

@@ -24,6 +24,7 @@ import numpy.typing as npt
 
 from onebox.geometry import Intrinsics
 from onebox.perception import kernels
+from onebox.perception.support import median
 
 if TYPE_CHECKING:
     from onebox.perception.tops import Tops
@@ -74,7 +75,7 @@ def seam_map(
     grey = np.asarray(cv2.cvtColor(np.ascontiguousarray(colour), cv2.COLOR_RGB2GRAY), np.uint8)
     sample = depth_m[:: max(1, depth_m.shape[0] // 32), :: max(1, depth_m.shape[1] // 32)]
     finite = sample[np.isfinite(sample)]
-    distance = _median(finite) if finite.size else 1.0
+    distance = median(finite) if finite.size else 1.0
     size = min(max(round(SEAM_WIDTH_M * lens.fx / max(distance, 0.1)), SEAM_MIN_PX), 9) | 1
     kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (size, size))
     dark = np.asarray(cv2.morphologyEx(grey, cv2.MORPH_BLACKHAT, kernel), dtype=np.uint8)
@@ -96,17 +97,6 @@ def seam_map(
         seam = ((dark > dark_step) | edge).astype(np.uint8)
     result: BoolArray = np.asarray(cv2.dilate(seam, np.ones((3, 3), np.uint8)), dtype=bool)
     return result, grey
-
-
-def _median(values: npt.NDArray[np.float32]) -> float:
-    """``np.median`` of float32 values, none NaN, without its generality's cost: the middle
-    one, or the float32 mean of the middle two (their float32 sum halved, as np.mean gives
-    it)."""
-    middle = values.size // 2
-    if values.size % 2:
-        return float(np.partition(values, middle)[middle])
-    pair = np.partition(values, (middle - 1, middle))
-    return float((pair[middle - 1] + pair[middle]) / np.float32(2.0))
 
 
 def _median_of_counts(counts: npt.NDArray[np.int64]) -> float:

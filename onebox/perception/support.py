@@ -90,8 +90,9 @@ class Support:
         return result
 
 
-def _median(values: Float64Array) -> float:
-    """``np.median`` of values with no NaN among them, without its generality's overhead."""
+def median(values: npt.NDArray[np.floating]) -> float:
+    """``np.median`` of values with no NaN among them, without its generality's overhead (the
+    mean of the middle two in the values' own precision, as ``np.median`` gives it)."""
     half = values.size // 2
     if values.size % 2:
         return float(np.partition(values, half)[half])
@@ -200,12 +201,12 @@ def _refine(
     at 3 sigma(z), least squares."""
     normal, offset, _ = _least_squares(points[inliers])
     d = points[:, 2]
-    distance = _median(d[inliers])
+    distance = median(d[inliers])
     for _ in range(2):
         residual = points @ normal + offset
         if sigma_m is None:
             scaled = residual[inliers] / (d[inliers] / distance) ** 2
-            sigma = 1.4826 * _median(np.abs(scaled - _median(scaled)))
+            sigma = 1.4826 * median(np.abs(scaled - median(scaled)))
             sigma = max(sigma, SIGMA_FLOOR_M, 0.5 * quantum_m2 * distance * distance)
         else:
             sigma = sigma_m
@@ -279,11 +280,11 @@ def fit_support(
             near = np.abs(residual) < _initial_threshold(points[:, 2], noise_sigma_m)
             share = float(near.mean())
             if near.sum() >= 3 and noise_sigma_m is None:
-                distance = _median(points[near, 2])
-                mad = _median(np.abs(residual[near] - _median(residual[near])))
+                distance = median(points[near, 2])
+                mad = median(np.abs(residual[near] - median(residual[near])))
                 sigma = max(1.4826 * mad, SIGMA_FLOOR_M)
             else:
-                distance, sigma = _median(points[:, 2]), noise_sigma_m or SIGMA_FLOOR_M
+                distance, sigma = median(points[:, 2]), noise_sigma_m or SIGMA_FLOOR_M
         else:
             share, distance, sigma = 0.0, 1.0, noise_sigma_m or SIGMA_FLOOR_M
         support = support_from_plane(normal_c, offset_c, camera_to_world, share, sigma, distance)
@@ -292,7 +293,7 @@ def fit_support(
         return None
     # Stray readings far beyond the scene (a stereo camera's mismatches at tens of metres)
     # would be within any plane's band there, the band growing as z^2: leave them out.
-    points = points[points[:, 2] < FAR_SHARE * _median(points[:, 2])]
+    points = points[points[:, 2] < FAR_SHARE * median(points[:, 2])]
     if len(points) < 30:
         return None
     rng = np.random.default_rng(seed)
@@ -345,7 +346,7 @@ def noise_against(depth_m: Float32Array, lens: Intrinsics, support: Support) -> 
     if near.sum() < 30:
         return support.sigma_m
     scaled = residual[near] / (d[near] / support.distance_m) ** 2
-    return max(1.4826 * _median(np.abs(scaled - _median(scaled))), SIGMA_FLOOR_M)
+    return max(1.4826 * median(np.abs(scaled - median(scaled))), SIGMA_FLOOR_M)
 
 
 def lump_width(depth_m: Float32Array, lens: Intrinsics, support: Support) -> float:
@@ -385,8 +386,8 @@ def lump_width(depth_m: Float32Array, lens: Intrinsics, support: Support) -> flo
     res_all, diff = np.concatenate(own), np.concatenate(apart)
     if len(diff) < 30:
         return 0.0
-    spread = _median(np.abs(res_all - _median(res_all)))
-    step = _median(np.abs(diff - _median(diff)))
+    spread = median(np.abs(res_all - median(res_all)))
+    step = median(np.abs(diff - median(diff)))
     if spread <= 0.0:
         return 0.0
     rho = 1.0 - 0.5 * (step / spread) ** 2

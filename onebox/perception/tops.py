@@ -481,7 +481,8 @@ def _measure(
         slope,
         centroid,
     ) = measured
-    on_border = _on_border(labels, n)
+    # Runs along the picture's edge: its extent past it is unknown.
+    on_border = kernels.border_spans(labels, BORDER_PX, n) >= ALONG_BORDER_PX
     return Tops(
         labels=labels,
         height_m=height,
@@ -505,13 +506,6 @@ def _measure(
         basis=basis,
         points=pts,
     )
-
-
-def _on_border(labels: IntArray, n: int) -> BoolArray:
-    """Which of the ``n`` tops run along the picture's edge (``ALONG_BORDER_PX`` or more within
-    ``BORDER_PX`` of it): their extent past it is unknown."""
-    on_border: BoolArray = kernels.border_spans(labels, BORDER_PX, n) >= ALONG_BORDER_PX
-    return on_border
 
 
 def _kept(before: Tops, labels: IntArray, start: npt.NDArray[np.intp]) -> npt.NDArray[np.intp]:
