@@ -7,9 +7,9 @@ cleaning the depth, the colour's Laplacian and gradient and the seam pixels), ov
 of every top at once, top by top (measuring them, their cross-sections at seams), or over the
 points looked at round every top (the probes). Each computes what the NumPy or OpenCV it
 replaced did, in the same order and precision (float32 where the picture is float32; sums
-taken in another order only where they are whole numbers, exact in any), so the finder's
-results do not change with it; the docstrings say what each computes. ``extents`` is kept for
-``benchmarks/bench_kernels.py``.
+taken in another order only where they are whole numbers, exact in any; a top's sags from its
+sums, equal to the last few digits), so the finder's results do not change with it; the
+docstrings say what each computes. ``extents`` is kept for ``benchmarks/bench_kernels.py``.
 
 The loops run on one thread, written so the compiler vectorises the inner ones where it can
 (no branches on the index, a pixel's neighbours read straight inside the picture's frame).
@@ -298,6 +298,8 @@ def measure_tops(
     p = np.empty(len(a))
     q = np.empty(len(a))
     footprint = np.empty(len(a))
+    window = np.empty((2, 2))
+    sums = np.empty((2, 2, 5))
     for k in range(n):
         lo, hi = start[k], start[k + 1]
         pixels[k] = hi - lo
@@ -389,59 +391,36 @@ def measure_tops(
         # How the top curves off its plane along each axis: the residuals' quadratic part over
         # a window round its middle, as the sag from its middle to the window's edges; two
         # windows, the middle half and the middle 80 % (less three pixels at each edge, which
-        # a camera smears).
-        # (Both axes in the same passes, each with its own sums in order.)
+        # a camera smears, and never narrower than the middle half: a top a few pixels across
+        # has no wider window to fit). Both windows and both axes in one pass, by their sums:
+        # with o the offset and r the residual over a window's n pixels, the quadratic's
+        # covariance sum (o^2 - mean o^2)(r - mean r) is sum o^2 r - n mean(o^2) mean(r), and
+        # its variance sum sum o^4 - n mean(o^2)^2.
+        window[0, 0], window[0, 1] = stretched_p / 4, stretched_q / 4
+        window[1, 0] = max(min(stretched_p * 0.4, stretched_p * 0.5 - 3.0 * step), stretched_p / 4)
+        window[1, 1] = max(min(stretched_q * 0.4, stretched_q * 0.5 - 3.0 * step), stretched_q / 4)
+        sums[:] = 0.0
+        for i in range(lo, hi):
+            for direction in range(2):
+                offset = (p[i] - mid_p) if direction == 0 else (q[i] - mid_q)
+                square = offset * offset
+                for w in range(2):
+                    if abs(offset) < window[w, direction]:
+                        sums[w, direction, 0] += 1.0
+                        sums[w, direction, 1] += square
+                        sums[w, direction, 2] += residual[i]
+                        sums[w, direction, 3] += square * residual[i]
+                        sums[w, direction, 4] += square * square
         for w in range(2):
-            if w == 0:
-                quarter_p, quarter_q = stretched_p / 4, stretched_q / 4
-            else:
-                # (never narrower than the middle half: a top a few pixels across has no
-                # wider window to fit)
-                quarter_p = max(
-                    min(stretched_p * 0.4, stretched_p * 0.5 - 3.0 * step), stretched_p / 4
-                )
-                quarter_q = max(
-                    min(stretched_q * 0.4, stretched_q * 0.5 - 3.0 * step), stretched_q / 4
-                )
-            count_p = inner_square_p = inner_residual_p = 0.0
-            count_q = inner_square_q = inner_residual_q = 0.0
-            for i in range(lo, hi):
-                offset_p = p[i] - mid_p
-                offset_q = q[i] - mid_q
-                if abs(offset_p) < quarter_p:
-                    count_p += 1.0
-                    inner_square_p += offset_p * offset_p
-                    inner_residual_p += residual[i]
-                if abs(offset_q) < quarter_q:
-                    count_q += 1.0
-                    inner_square_q += offset_q * offset_q
-                    inner_residual_q += residual[i]
-            count_p = max(count_p, 1.0)
-            count_q = max(count_q, 1.0)
-            inner_square_p /= count_p
-            inner_residual_p /= count_p
-            inner_square_q /= count_q
-            inner_residual_q /= count_q
-            spread_p = curved_p = spread_q = curved_q = 0.0
-            for i in range(lo, hi):
-                offset_p = p[i] - mid_p
-                offset_q = q[i] - mid_q
-                if abs(offset_p) < quarter_p:
-                    centred = offset_p * offset_p - inner_square_p
-                    curved_p += centred * (residual[i] - inner_residual_p)
-                    spread_p += centred * centred
-                if abs(offset_q) < quarter_q:
-                    centred = offset_q * offset_q - inner_square_q
-                    curved_q += centred * (residual[i] - inner_residual_q)
-                    spread_q += centred * centred
             for direction in range(2):
                 extent = stretched_p if direction == 0 else stretched_q
-                window = quarter_p if direction == 0 else quarter_q
-                count = count_p if direction == 0 else count_q
-                curved = curved_p if direction == 0 else curved_q
-                spread = spread_p if direction == 0 else spread_q
+                count = max(sums[w, direction, 0], 1.0)
+                mean_square = sums[w, direction, 1] / count
+                mean_residual = sums[w, direction, 2] / count
+                curved = sums[w, direction, 3] - count * mean_square * mean_residual
+                spread = sums[w, direction, 4] - count * mean_square * mean_square
                 curve = (curved / count) / max(spread / count, 1e-18)
-                this = abs(curve) * max(window, 0.0) ** 2
+                this = abs(curve) * max(window[w, direction], 0.0) ** 2
                 share = this / max(extent / 2, 1e-9)
                 if share > sag_share[k, w]:
                     sag[k, w] = this
