@@ -1571,6 +1571,37 @@ def plane_votes(
 
 
 @numba.njit(cache=True, nogil=True)
+def plane_moments(
+    points: Float64Array, inliers: npt.NDArray[np.bool_]
+) -> tuple[Float64Array, Float64Array]:
+    """The mean of ``points`` (n, 3) where ``inliers``, and their covariance about it (3, 3,
+    over count - 1, as ``np.cov``), without gathering them."""
+    centre = np.zeros(3)
+    count = 0
+    for i in range(len(points)):
+        if inliers[i]:
+            count += 1
+            for j in range(3):
+                centre[j] += points[i, j]
+    centre /= max(count, 1)
+    moments = np.zeros((3, 3))
+    for i in range(len(points)):
+        if inliers[i]:
+            d0 = points[i, 0] - centre[0]
+            d1 = points[i, 1] - centre[1]
+            d2 = points[i, 2] - centre[2]
+            moments[0, 0] += d0 * d0
+            moments[0, 1] += d0 * d1
+            moments[0, 2] += d0 * d2
+            moments[1, 1] += d1 * d1
+            moments[1, 2] += d1 * d2
+            moments[2, 2] += d2 * d2
+    moments[1, 0], moments[2, 0], moments[2, 1] = moments[0, 1], moments[0, 2], moments[1, 2]
+    moments /= max(count - 1, 1)
+    return centre, moments
+
+
+@numba.njit(cache=True, nogil=True)
 def grid_sample(
     depth: Float32Array, stride: int, across: Float64Array, down: Float64Array
 ) -> tuple[Float64Array, npt.NDArray[np.intp]]:
@@ -1655,6 +1686,7 @@ def warm_up() -> None:
     laplacian_counts(grey)
     seam_pixels(grey, grey, 1.0, 1.0)
     plane_votes(np.eye(3), a[:1].repeat(3), np.eye(3), a[:1].repeat(3))
+    plane_moments(np.eye(3), np.ones(3, dtype=np.bool_))
     one_top = np.ones((1, 2))
     seam_cuts(
         np.arange(2),

@@ -175,14 +175,11 @@ def _ransac(
     return normals[best], float(offsets[best])
 
 
-def _least_squares(points: Float64Array) -> tuple[Float64Array, float, float]:
-    """The plane through points by least squares: normal toward the origin, offset, rms."""
-    centre = points.mean(axis=0)
-    # np.cov's own steps (its argument handling costs more than the sums on a few points).
-    centred = np.array((points - centre).T, dtype=np.float64)
-    centred -= centred.mean(axis=1)[:, None]
-    moments = np.dot(centred, centred.T)
-    moments *= 1.0 / (len(points) - 1)
+def _least_squares(
+    points: Float64Array, inliers: npt.NDArray[np.bool_]
+) -> tuple[Float64Array, float, float]:
+    """The plane through the inliers by least squares: normal toward the origin, offset, rms."""
+    centre, moments = kernels.plane_moments(points, inliers)
     values, vectors = np.linalg.eigh(moments)
     normal = vectors[:, 0]
     offset = -float(normal @ centre)
@@ -199,7 +196,7 @@ def _refine(
 ) -> tuple[Float64Array, float, float, float, npt.NDArray[np.bool_]]:
     """Least squares, noise from the residuals (never under half a depth step), inliers again
     at 3 sigma(z), least squares."""
-    normal, offset, _ = _least_squares(points[inliers])
+    normal, offset, _ = _least_squares(points, inliers)
     d = points[:, 2]
     distance = median(d[inliers])
     for _ in range(2):
@@ -217,7 +214,7 @@ def _refine(
         if new.sum() < 3:
             break
         inliers = new
-        normal, offset, _ = _least_squares(points[inliers])
+        normal, offset, _ = _least_squares(points, inliers)
     return normal, offset, sigma, distance, inliers
 
 
