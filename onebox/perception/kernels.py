@@ -7,9 +7,10 @@ cleaning the depth, the colour's Laplacian and gradient and the seam pixels), ov
 of every top at once, top by top (measuring them, their cross-sections at seams), or over the
 points looked at round every top (the probes). Each computes what the NumPy or OpenCV it
 replaced did, in the same order and precision (float32 where the picture is float32; sums
-taken in another order only where they are whole numbers, exact in any; a top's sags from its
-sums, equal to the last few digits), so the finder's results do not change with it; the
-docstrings say what each computes. ``extents`` is kept for ``benchmarks/bench_kernels.py``.
+taken in another order only where they are whole numbers, exact in any; a top's sags and
+the support plane's moments from plain sums, equal to the last few digits), so the finder's
+results do not change with it; the docstrings say what each computes. ``extents`` is kept
+for ``benchmarks/bench_kernels.py``.
 
 The loops run on one thread, written so the compiler vectorises the inner ones where it can
 (no branches on the index, a pixel's neighbours read straight inside the picture's frame).
