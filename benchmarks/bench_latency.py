@@ -53,7 +53,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from onebox import bus, pictures
 from onebox.recording import stamp_ns as stamp_of
-from onebox.testing.processes import Processes, bus_args, free_port
+from onebox.testing.processes import Processes, bus_args, free_port, wait_for_output
 from onebox.testing.realdata import (
     COMMITTED,
     SHARED,
@@ -85,6 +85,8 @@ from schemas import (
 
 WARM_UP_S = 60.0
 """How long the locator may take to answer its first capture (starting, compiling)."""
+READY_TIMEOUT_S = 180.0
+"""How long the locator's finder may take to compile its kernels into an empty cache."""
 
 
 class Clock:
@@ -341,6 +343,14 @@ def measure(
     seed = ["--method", "seed"] if method == "seed" else []
     locator = procs.start("locator", "--log-interval-s", "5", *seed)
     name = f"{method}: " if args.against_seed else ""
+    if method != "seed":
+        # The finder compiles its kernels before its first picture (tens of seconds on a first
+        # run, with an empty cache): captures sent before then would time nothing.
+        print(f"{name}waiting for the locator's finder to be ready ...", flush=True)
+        try:
+            wait_for_output(locator, "finder ready", READY_TIMEOUT_S)
+        except AssertionError as error:  # it ended, or never said it was ready
+            return Row(method, [], 0, [*str(error).splitlines()[-3:], procs.stop(locator)])
     what = "sim publishing" if pubs is None else "publishing"
     print(f"{name}{what} {args.captures} captures at {args.rate_hz:g} Hz ...", flush=True)
     if pubs is None:
