@@ -826,6 +826,19 @@ def test_the_kernels_measure_what_numpy_does():
         assert abs((np.degrees(found[k]) - turn + 45.0) % 90.0 - 45.0) < 1.5
 
 
+def test_the_kernels_take_a_planes_moments_as_numpy_does():
+    """kernels.plane_moments: the mean and covariance (np.cov's) of the points marked inliers,
+    without gathering them; the plane fitted from them is the one NumPy's would give."""
+    rng = np.random.default_rng(4)
+    points = rng.normal(size=(400, 3)) * (0.3, 0.2, 0.01) + (0.1, -0.2, 1.5)
+    inliers = rng.random(400) < 0.7
+    centre, moments = kernels.plane_moments(points, inliers)
+    chosen = points[inliers]
+    assert centre == pytest.approx(chosen.mean(axis=0), abs=1e-12)
+    assert np.allclose(moments, np.cov(chosen.T), rtol=1e-10, atol=1e-14)
+    assert np.array_equal(moments, moments.T)
+
+
 @pytest.mark.parametrize("shape", [(2, 2), (3, 2), (2, 7), (5, 6), (31, 44)])
 def test_the_kernels_read_the_colour_as_opencv_does(shape: tuple[int, int]):
     """kernels.laplacian_counts and seam_pixels: the Laplacian's absolute values at every
