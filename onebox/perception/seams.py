@@ -9,9 +9,10 @@ from one side of the region to the other, parallel to a side (packed cartons are
 Contract: :func:`seam_map` marks the pixels of thin dark lines and strong colour edges, with
 tolerances from the picture's own noise; :func:`split_at_seams` cuts every top that such a
 line crosses from side to side (``SEAM_SHARE`` of the cross-section's pixels, clearly more
-than the top's print elsewhere and beside the line; not an edge of tape) into two, returning
-the new labels or None when nothing is cut. Every top's cross-sections are counted at once,
-in one pass over the pixels (:func:`onebox.perception.kernels.seam_cuts`).
+than the top's print elsewhere and beside the line; not an edge of tape; not running beside
+something standing on the top for most of its length, which is that thing's edge) into two,
+returning the new labels or None when nothing is cut. Every top's cross-sections are counted
+at once, in one pass over the pixels (:func:`onebox.perception.kernels.seam_cuts`).
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ if TYPE_CHECKING:
 BoolArray = npt.NDArray[np.bool_]
 IntArray = npt.NDArray[np.int32]
 Float64Array = npt.NDArray[np.float64]
+Float32Array = npt.NDArray[np.float32]
 
 SEAM_WIDTH_M = 0.006
 """The widest gap between two touching cartons that reads as a thin line (wider is a gap the
@@ -65,6 +67,15 @@ two sides too) and no wider than this, with alike flaps either side, is tape or 
 band (packing tape is 48 or 75 mm wide), not two seams..."""
 MIN_PART_M = 0.04
 """A seam leaves at least this much of the top either side: the narrowest carton."""
+RISE_M = 0.02
+"""A cut whose line runs beside something standing this much higher than the top (4 sigma(z)
+at least; the lowest box), within ``BESIDE_PX`` pixels (a box's face seen rising from its
+foot is a pixel or two above the top there)..."""
+BESIDE_PX = 3
+EDGE_BESIDE = 0.75
+"""...over this share of its length or more follows that thing's edge: no seam (a carton
+standing across a seam, as in a cross-stacked layer, hides less of it)."""
+_BESIDE = np.ones((2 * BESIDE_PX + 1, 2 * BESIDE_PX + 1), np.uint8)
 
 
 def seam_map(
@@ -109,8 +120,13 @@ def _median_of_counts(counts: npt.NDArray[np.int64]) -> float:
     return 0.5 * (below + above)
 
 
-def split_at_seams(tops: Tops, seam: BoolArray, grey: npt.NDArray[np.uint8]) -> IntArray | None:
-    """New labels with every top cut at the seam that crosses it best, or None."""
+def split_at_seams(
+    tops: Tops, seam: BoolArray, grey: npt.NDArray[np.uint8], height_m: Float32Array
+) -> IntArray | None:
+    """New labels with every top cut at the seam that crosses it best, or None. A line that
+    runs beside something standing on the top (higher than it, by ``height_m``: each pixel's
+    height) for most of its length is that thing's edge, not a seam: a box lying across a
+    carton, whose top's pieces either side of it are one top."""
     index, top = tops.points.index, tops.points.top
     if index.size == 0:
         return None
@@ -143,6 +159,15 @@ def split_at_seams(tops: Tops, seam: BoolArray, grey: npt.NDArray[np.uint8]) -> 
     )
     if not cut_top.any():
         return None
+    rise = np.concatenate([[np.inf], tops.height_m + np.maximum(4.0 * tops.sigma_m, RISE_M)])
+    highest = cv2.dilate(np.nan_to_num(height_m, nan=-np.inf), _BESIDE)
+    beside = (highest > rise[tops.labels]).ravel()[index]
+    pixel = np.sqrt(tops.area_m2 / np.maximum(tops.pixels, 1))
+    on_line = cut_top[top] & (np.abs(_cut_coordinate(tops, cut_along) - cut_at[top]) <= pixel[top])
+    line = np.bincount(top[on_line], minlength=len(tops))
+    cut_top &= np.bincount(top[on_line & beside], minlength=len(tops)) < EDGE_BESIDE * line
+    if not cut_top.any():
+        return None
     return cut_labels(tops, cut_top, cut_along, cut_at)
 
 
@@ -154,16 +179,23 @@ def cut_labels(
     labels = tops.labels
     index, top = tops.points.index, tops.points.top
     n = len(tops)
-    a = tops.points.a - tops.middle_ab[top, 0]
-    b = tops.points.b - tops.middle_ab[top, 1]
-    ax = tops.axis_ab[top]
-    along = a * ax[:, 0] + b * ax[:, 1]
-    across = b * ax[:, 0] - a * ax[:, 1]
-    coordinate = np.where(cut_along[top], along, across)
-    moved = cut_top[top] & (coordinate > cut_at[top])
+    moved = cut_top[top] & (_cut_coordinate(tops, cut_along) > cut_at[top])
     new_label = np.zeros(n, dtype=np.int32)
     new_label[cut_top] = n + 1 + np.arange(int(cut_top.sum()), dtype=np.int32)
     result = labels.copy()
     flat = result.ravel()
     flat[index[moved]] = new_label[top[moved]]
+    return result
+
+
+def _cut_coordinate(tops: Tops, cut_along: BoolArray) -> Float64Array:
+    """Each top pixel's offset from its top's middle along the axis its cut would cross: the
+    length where ``cut_along``, else the width."""
+    top = tops.points.top
+    a = tops.points.a - tops.middle_ab[top, 0]
+    b = tops.points.b - tops.middle_ab[top, 1]
+    ax = tops.axis_ab[top]
+    along = a * ax[:, 0] + b * ax[:, 1]
+    across = b * ax[:, 0] - a * ax[:, 1]
+    result: Float64Array = np.where(cut_along[top], along, across)
     return result

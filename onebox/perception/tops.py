@@ -209,7 +209,7 @@ def find_tops(
         tops = _measure(joined, depth_m, surface, lens, basis, tops)
     if seam is not None:
         for _ in range(SEAM_ROUNDS):
-            split = seams.split_at_seams(tops, seam[0], seam[1])
+            split = seams.split_at_seams(tops, seam[0], seam[1], surface.height_m)
             if split is None:
                 break
             tops = _measure(split, depth_m, surface, lens, basis, tops)
