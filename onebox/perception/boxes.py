@@ -284,8 +284,9 @@ def find_boxes(
     round_ = _look_round(tops, origin, depth, lens, support)
     looked = _looked_at(tops, round_, lens, support)
     face_bottom, ledge, faces = _face_bottom(tops, looked, origin, depth, lens, support)
-    is_box = _boxes(tops, round_, faces, settings, lump_px)
     base, on = _bases(tops, round_, face_bottom, ledge, depth, lens, support)
+    round_ = _under_carried(tops, round_, on)
+    is_box = _boxes(tops, round_, faces, settings, lump_px)
     # A top that several boxes stand on, and that they mostly hide or that they stand on
     # outside its rectangle (past a side of it something hides), is a platform (a pallet's
     # top, its rim seen in front of the load): a level to stand on, not a box to report. A
@@ -382,10 +383,21 @@ class Round:
     """(n, 4, PROBES_PER_SIDE): the top seen at each probe's pixel (-1: none)."""
     ab: Float64Array
     """(n, 4, PROBES_PER_SIDE, 2): where the probes are, in the support plane's coordinates."""
-    covered: Float64Array
-    """(n,): the share of the top's rectangle something nearer hides."""
-    corners_covered: Float64Array
-    """(n,): the share of its four corners something nearer hides."""
+    cover: BoolArray
+    """(n, COVER_GRID ** 2): which points of a grid on the top's rectangle are hidden: seen
+    nearer (a box standing on it, an object in front), or under a top standing on it."""
+
+    @property
+    def covered(self) -> Float64Array:
+        """(n,): the share of the top's rectangle hidden."""
+        result: Float64Array = self.cover.mean(axis=1)
+        return result
+
+    @property
+    def corners_covered(self) -> Float64Array:
+        """(n,): the share of its four corners hidden."""
+        result: Float64Array = self.cover[:, _COVER_CORNER].mean(axis=1)
+        return result
 
 
 _PROBE_SPREAD = np.linspace(-0.8, 0.8, PROBES_PER_SIDE)
@@ -393,6 +405,7 @@ _PROBE_SPREAD = np.linspace(-0.8, 0.8, PROBES_PER_SIDE)
 _COVER_LINE = np.linspace(-0.45, 0.45, COVER_GRID)
 _COVER_S, _COVER_T = (v.ravel() for v in np.meshgrid(_COVER_LINE, _COVER_LINE, indexing="ij"))
 """The grid on a top's rectangle looked at for what hides it: shares of its length and width."""
+_COVER_CORNER = (np.abs(_COVER_S) == _COVER_LINE[-1]) & (np.abs(_COVER_T) == _COVER_LINE[-1])
 _FACE_SPREAD = np.linspace(-0.6, 0.6, 5)
 """Where the points on a side's plane are along it: its middle 60 %, in shares of its half."""
 
@@ -431,7 +444,7 @@ def _look_round(
         lower = np.where(seen > z_expected + tolerance, seen_height, np.nan)
     hidden = nearer.mean(axis=2) >= HIDDEN_SHARE
     unread = (np.isnan(seen) & inside).mean(axis=2) >= HIDDEN_SHARE
-    covered, corners_covered = _covered(tops, depth_m, lens, support)
+    cover = _covered(tops, depth_m, lens, support)
     # A lower surface at no level (neither the support nor any top) is the object going on
     # down past its top: a box's own side face seen at a slant, or a curved or ragged body.
     levels = np.concatenate([[0.0], tops.height_m])
@@ -443,7 +456,7 @@ def _look_round(
     seen_top = np.where(
         in_crop, tops.labels[np.clip(vc, 0, rows - 1), np.clip(uc, 0, cols - 1)] - 1, -1
     )
-    return Round(hidden, unread, lower, sloping, seen_top, ab, covered, corners_covered)
+    return Round(hidden, unread, lower, sloping, seen_top, ab, cover)
 
 
 def _lens_array(lens: Intrinsics) -> Float64Array:
@@ -451,11 +464,9 @@ def _lens_array(lens: Intrinsics) -> Float64Array:
     return np.array([lens.fx, lens.fy, lens.cx, lens.cy])
 
 
-def _covered(
-    tops: Tops, depth_m: Float32Array, lens: Intrinsics, support: Support
-) -> tuple[Float64Array, Float64Array]:
-    """How much of each top's rectangle, and of its four corners, something nearer hides (a
-    box standing on it, an object in front): a grid of points on the rectangle, looked at."""
+def _covered(tops: Tops, depth_m: Float32Array, lens: Intrinsics, support: Support) -> BoolArray:
+    """Which points of a grid on each top's rectangle something nearer hides (a box standing
+    on it, an object in front), looked at."""
     s, t = _COVER_S, _COVER_T
     z_expected, seen = kernels.probe_cover(
         tops.middle_ab,
@@ -472,9 +483,38 @@ def _covered(
     )
     tolerance = np.maximum(3.0 * tops.sigma_m, 0.006)[:, None]
     with np.errstate(invalid="ignore"):
-        nearer = seen < z_expected - 4.0 * tolerance
-    corner = (np.abs(s) == _COVER_LINE[-1]) & (np.abs(t) == _COVER_LINE[-1])
-    return nearer.mean(axis=1), nearer[:, corner].mean(axis=1)
+        nearer: BoolArray = seen < z_expected - 4.0 * tolerance
+    return nearer
+
+
+def _under_carried(tops: Tops, round_: Round, on: npt.NDArray[np.intp]) -> Round:
+    """``round_`` with the points of each top's grid under the rectangle of a top standing on
+    it, over it (its middle within the rectangle), hidden too: what stands on a top covers
+    it, including the band round its foot whose faces rise too little above the top there to
+    be seen nearer."""
+    j = np.flatnonzero(on >= 0)
+    k = on[j]
+    d = tops.middle_ab[j] - tops.middle_ab[k]
+    along = np.abs(d[:, 0] * tops.axis_ab[k, 0] + d[:, 1] * tops.axis_ab[k, 1])
+    across = np.abs(d[:, 1] * tops.axis_ab[k, 0] - d[:, 0] * tops.axis_ab[k, 1])
+    over = (along <= 0.5 * tops.length_m[k]) & (across <= 0.5 * tops.width_m[k])
+    j, k = j[over], k[over]
+    if len(j) == 0:
+        return round_
+    axis_k, axis_j = tops.axis_ab[k], tops.axis_ab[j]
+    along = _COVER_S[None, :] * tops.length_m[k, None]
+    across = _COVER_T[None, :] * tops.width_m[k, None]
+    d = tops.middle_ab[k, None, :] - tops.middle_ab[j, None, :]  # (m, 1, 2)
+    da = d[..., 0] + along * axis_k[:, None, 0] - across * axis_k[:, None, 1]
+    db = d[..., 1] + along * axis_k[:, None, 1] + across * axis_k[:, None, 0]
+    own_along = np.abs(da * axis_j[:, None, 0] + db * axis_j[:, None, 1])
+    own_across = np.abs(db * axis_j[:, None, 0] - da * axis_j[:, None, 1])
+    under = (own_along <= 0.5 * tops.length_m[j, None]) & (
+        own_across <= 0.5 * tops.width_m[j, None]
+    )
+    cover = round_.cover.copy()
+    np.logical_or.at(cover, k, under)
+    return replace(round_, cover=cover)
 
 
 def _boxes(
