@@ -26,12 +26,14 @@ The pipeline, one module a physical effect:
      much of its rectangle is not seen;
    - which tops are boxes (:func:`_boxes`): large enough, level, flat, not curved over their
      middle half or their middle 80 % beyond each fitted sag's noise, filling their rectangle
-     and its corners (of what is seen, and a fifth of the rectangle at least; more than fill
-     it is a surface folding over itself), not cut off, not falling away on more than two
-     sides past which no face of their own is seen going down;
-   - what each top stands on (:func:`_bases`): the support or a lower top, looked for at its
-     own height just past the top's sides, within where the top's faces are seen to end
-     (:func:`_face_bottom`), or where they end on a box sticking out under them;
+     and its corners (of what is seen, or covered by a top standing over it
+     (:func:`_under_carried`), and a fifth of the rectangle at least; more than fill it is a
+     surface folding over itself), not cut off, not falling away on more than two sides past
+     which no face of their own is seen going down;
+   - what each top stands on (:func:`_bases`, before the test above): the support or a lower
+     top, looked for at its own height just past the top's sides, within where the top's faces
+     are seen to end (:func:`_face_bottom`), or where they end on a box sticking out under
+     them;
    - what is no box after all: a top with nothing under its edges (:func:`_hollow`, a table on
      legs) and a platform (a top two boxes or more stand on that they mostly hide, or that
      they stand on past one side of it that something hides or no reading shows: a pallet's
@@ -495,9 +497,9 @@ def _under_carried(tops: Tops, round_: Round, on: npt.NDArray[np.intp]) -> Round
     j = np.flatnonzero(on >= 0)
     k = on[j]
     d = tops.middle_ab[j] - tops.middle_ab[k]
-    along = np.abs(d[:, 0] * tops.axis_ab[k, 0] + d[:, 1] * tops.axis_ab[k, 1])
-    across = np.abs(d[:, 1] * tops.axis_ab[k, 0] - d[:, 0] * tops.axis_ab[k, 1])
-    over = (along <= 0.5 * tops.length_m[k]) & (across <= 0.5 * tops.width_m[k])
+    off_along = np.abs(d[:, 0] * tops.axis_ab[k, 0] + d[:, 1] * tops.axis_ab[k, 1])
+    off_across = np.abs(d[:, 1] * tops.axis_ab[k, 0] - d[:, 0] * tops.axis_ab[k, 1])
+    over = (off_along <= 0.5 * tops.length_m[k]) & (off_across <= 0.5 * tops.width_m[k])
     j, k = j[over], k[over]
     if len(j) == 0:
         return round_
