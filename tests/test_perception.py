@@ -828,7 +828,7 @@ def test_the_kernels_measure_what_numpy_does():
 
 def test_the_kernels_take_a_planes_moments_as_numpy_does():
     """kernels.plane_moments: the mean and covariance (np.cov's) of the points marked inliers,
-    without gathering them; the plane fitted from them is the one NumPy's would give."""
+    without gathering them."""
     rng = np.random.default_rng(4)
     points = rng.normal(size=(400, 3)) * (0.3, 0.2, 0.01) + (0.1, -0.2, 1.5)
     inliers = rng.random(400) < 0.7

@@ -33,8 +33,6 @@ TABLE = "measured from the table"
 BASE = "base read off the top under it"
 """A box on another measured from a level its faces end at, millimetres to centimetres above or
 below the top it stands on."""
-"""What shows of a carton round a box on it reported as two boxes, one either side of that box:
-one is taken for the carton's part seen, the other is false."""
 SHADE = "cartons of one shade not parted"
 """Touching cartons of one shade found as one top: reported as one box, or left out (the top
 fills too little of its rectangle, or boxes stand on it and it is a platform)."""
