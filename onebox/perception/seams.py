@@ -163,23 +163,31 @@ def split_at_seams(
     highest = cv2.dilate(np.nan_to_num(height_m, nan=-np.inf), _BESIDE)
     beside = (highest > rise[tops.labels]).ravel()[index]
     pixel = np.sqrt(tops.area_m2 / np.maximum(tops.pixels, 1))
-    on_line = cut_top[top] & (np.abs(_cut_coordinate(tops, cut_along) - cut_at[top]) <= pixel[top])
+    coordinate = _cut_coordinate(tops, cut_along)
+    on_line = cut_top[top] & (np.abs(coordinate - cut_at[top]) <= pixel[top])
     line = np.bincount(top[on_line], minlength=len(tops))
     cut_top &= np.bincount(top[on_line & beside], minlength=len(tops)) < EDGE_BESIDE * line
     if not cut_top.any():
         return None
-    return cut_labels(tops, cut_top, cut_along, cut_at)
+    return cut_labels(tops, cut_top, cut_along, cut_at, coordinate)
 
 
 def cut_labels(
-    tops: Tops, cut_top: BoolArray, cut_along: BoolArray, cut_at: Float64Array
+    tops: Tops,
+    cut_top: BoolArray,
+    cut_along: BoolArray,
+    cut_at: Float64Array,
+    coordinate: Float64Array | None = None,
 ) -> IntArray:
     """New labels with each ``cut_top`` cut in two by a line across its rectangle's length
-    (``cut_along``) or its width, ``cut_at`` from its middle: the pixels past it a new top."""
+    (``cut_along``) or its width, ``cut_at`` from its middle: the pixels past it a new top.
+    ``coordinate`` is each pixel's offset across the cut (:func:`_cut_coordinate`), if known."""
     labels = tops.labels
     index, top = tops.points.index, tops.points.top
     n = len(tops)
-    moved = cut_top[top] & (_cut_coordinate(tops, cut_along) > cut_at[top])
+    if coordinate is None:
+        coordinate = _cut_coordinate(tops, cut_along)
+    moved = cut_top[top] & (coordinate > cut_at[top])
     new_label = np.zeros(n, dtype=np.int32)
     new_label[cut_top] = n + 1 + np.arange(int(cut_top.sum()), dtype=np.int32)
     result = labels.copy()
