@@ -28,8 +28,7 @@ The pipeline, one module a physical effect:
      middle half or their middle 80 % beyond each fitted sag's noise, filling their rectangle
      and its corners (of what is seen, or covered by a top standing over it
      (:func:`_under_carried`), and a fifth of the rectangle at least; more than fill it is a
-     surface folding over itself), not cut off, not falling away on more than two sides past
-     which no face of their own is seen going down;
+     surface folding over itself), not cut off;
    - what each top stands on (:func:`_bases`, before the test above): the support or a lower
      top, looked for at its own height just past the top's sides, within where the top's faces
      are seen to end (:func:`_face_bottom`), or where they end on a box sticking out under
@@ -285,10 +284,10 @@ def find_boxes(
     # What lies round the tops is looked at in the whole picture.
     round_ = _look_round(tops, origin, depth, lens, support)
     looked = _looked_at(tops, round_, lens, support)
-    face_bottom, ledge, faces = _face_bottom(tops, looked, origin, depth, lens, support)
+    face_bottom, ledge = _face_bottom(tops, looked, origin, depth, lens, support)
     base, on = _bases(tops, round_, face_bottom, ledge, depth, lens, support)
     round_ = _under_carried(tops, round_, on)
-    is_box = _boxes(tops, round_, faces, settings, lump_px)
+    is_box = _boxes(tops, round_, settings, lump_px)
     # A top that several boxes stand on, and that they mostly hide or that they stand on
     # outside its rectangle (past a side of it something hides), is a platform (a pallet's
     # top, its rim seen in front of the load): a level to stand on, not a box to report. A
@@ -378,9 +377,6 @@ class Round:
     lower_m: Float64Array
     """(n, 4, PROBES_PER_SIDE): the height seen past the side where it is lower than the top
     (NaN where not)."""
-    sloping: BoolArray
-    """Past the side the surface goes on down at no level: a side face seen at a slant, or a
-    round or ragged body."""
     seen_top: npt.NDArray[np.intp]
     """(n, 4, PROBES_PER_SIDE): the top seen at each probe's pixel (-1: none)."""
     ab: Float64Array
@@ -447,18 +443,13 @@ def _look_round(
     hidden = nearer.mean(axis=2) >= HIDDEN_SHARE
     unread = (np.isnan(seen) & inside).mean(axis=2) >= HIDDEN_SHARE
     cover = _covered(tops, depth_m, lens, support)
-    # A lower surface at no level (neither the support nor any top) is the object going on
-    # down past its top: a box's own side face seen at a slant, or a curved or ragged body.
-    levels = np.concatenate([[0.0], tops.height_m])
-    off_level = np.min(np.abs(lower[..., None] - levels), axis=-1) > 2.0 * tolerance
-    sloping = (off_level & np.isfinite(lower)).mean(axis=2) >= 0.5
     rows, cols = tops.labels.shape
     vc, uc = vi - origin[0], ui - origin[1]
     in_crop = inside & (vc >= 0) & (vc < rows) & (uc >= 0) & (uc < cols)
     seen_top = np.where(
         in_crop, tops.labels[np.clip(vc, 0, rows - 1), np.clip(uc, 0, cols - 1)] - 1, -1
     )
-    return Round(hidden, unread, lower, sloping, seen_top, ab, cover)
+    return Round(hidden, unread, lower, seen_top, ab, cover)
 
 
 def _lens_array(lens: Intrinsics) -> Float64Array:
@@ -519,9 +510,7 @@ def _under_carried(tops: Tops, round_: Round, on: npt.NDArray[np.intp]) -> Round
     return replace(round_, cover=cover)
 
 
-def _boxes(
-    tops: Tops, round_: Round, faces: BoolArray, settings: FinderSettings, lump_px: float
-) -> BoolArray:
+def _boxes(tops: Tops, round_: Round, settings: FinderSettings, lump_px: float) -> BoolArray:
     """Which tops are boxes' (see the module docstring)."""
     # What something nearer hides cannot be filled: ask for the rest.
     fill_needed = np.maximum(settings.min_score * (1.0 - round_.covered), MIN_SEEN)
@@ -541,7 +530,6 @@ def _boxes(
         & (tops.fill >= fill_needed)
         & (tops.fill <= MAX_FILL)
         & (tops.corners >= corners_needed)
-        & ((round_.sloping & ~faces).sum(axis=1) <= 2)
         & ~curved.any(axis=1)
     )
     if not settings.keep_cut_off:
@@ -627,12 +615,11 @@ def _face_bottom(
     depth_m: Float32Array,
     lens: Intrinsics,
     support: Support,
-) -> tuple[Float64Array, BoolArray, BoolArray]:
+) -> tuple[Float64Array, BoolArray]:
     """How far down each top's faces are seen going on from its edge without a break (on the
     side that shows them lowest): a box's side ends where it stands. NaN where no face is
     seen. Also whether the face is seen to end there: past it nothing is where the face would
-    go on, or the face of a box under it sticks out (not a top in front, which only hides it).
-    And (n, 4) whether a face is seen going down from each side's edge at all."""
+    go on, or the face of a box under it sticks out (not a top in front, which only hides it)."""
     n = len(tops)
     share = 1.0 - np.linspace(0.05, 1.0, FACE_LEVELS)
     heights = share[None, :] * tops.height_m[:, None]  # top down to the support
@@ -643,7 +630,6 @@ def _face_bottom(
         nearer = (seen < z_expected - tolerance) & inside
     present = on_face.mean(axis=3) >= 0.5  # (n, 4, levels)
     run = np.cumprod(present, axis=2).sum(axis=2)  # levels seen from the edge down, unbroken
-    faces = run > 0
     run = np.where(looked, run, 0)
     side = np.argmax(run, axis=1)
     deepest = run[np.arange(n), side]
@@ -670,7 +656,7 @@ def _face_bottom(
     ends = recessed | sticking_out
     ledge = (ends.mean(axis=1) >= 0.5) & (deepest > 0) & (deepest < FACE_LEVELS)
     looked_any = looked.any(axis=1)
-    return np.where(looked_any, bottom, np.nan), ledge & looked_any, faces
+    return np.where(looked_any, bottom, np.nan), ledge & looked_any
 
 
 def _bases(
