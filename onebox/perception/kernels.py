@@ -9,8 +9,7 @@ points looked at round every top (the probes). Each computes what the NumPy or O
 replaced did, in the same order and precision (float32 where the picture is float32; sums
 taken in another order only where they are whole numbers, exact in any; a top's sags and
 the support plane's moments from plain sums, equal to the last few digits), so the finder's
-results do not change with it; the docstrings say what each computes. ``extents`` is kept
-for ``benchmarks/bench_kernels.py``.
+results do not change with it; the docstrings say what each computes.
 
 The loops run on one thread, written so the compiler vectorises the inner ones where it can
 (no branches on the index, a pixel's neighbours read straight inside the picture's frame).
@@ -29,29 +28,6 @@ import numpy.typing as npt
 Float32Array = npt.NDArray[np.float32]
 Float64Array = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int32]
-
-
-@numba.njit(cache=True, nogil=True)
-def extents(label: IntArray, p: Float64Array, q: Float64Array, count: int) -> Float64Array:
-    """For each top, (min p, max p, min q, max q) of its points: shape (count, 4)."""
-    out = np.empty((count, 4))
-    out[:, 0] = np.inf
-    out[:, 1] = -np.inf
-    out[:, 2] = np.inf
-    out[:, 3] = -np.inf
-    for i in range(label.shape[0]):
-        k = label[i]
-        if k < 0:
-            continue
-        if p[i] < out[k, 0]:
-            out[k, 0] = p[i]
-        if p[i] > out[k, 1]:
-            out[k, 1] = p[i]
-        if q[i] < out[k, 2]:
-            out[k, 2] = q[i]
-        if q[i] > out[k, 3]:
-            out[k, 3] = q[i]
-    return out
 
 
 @numba.njit(cache=True, nogil=True)
