@@ -32,8 +32,9 @@ class Detection3D(Message, frozen=True, kw_only=True):
     """How many sides of its top something nearer hides: its size along them is a lower
     bound (0 to 4)."""
     height_seen: bool = True
-    """False when the level it stands on is not seen beside it (a carton in a full layer): the
-    height is then measured to the level its neighbours stand on, or is the catalogue's."""
+    """False when the level it stands on is not seen beside it, on the support or on a top
+    that reaches under it (a carton in a full layer, or among lower neighbours): the height
+    is then measured to the level found beside it, or is the catalogue's."""
 
 
 class Detection3DArray(Message, frozen=True, kw_only=True):

@@ -583,6 +583,23 @@ def test_a_box_on_a_box_says_what_it_stands_on():
     top, bottom = find_boxes(depth, camera.lens, camera.camera_to_world, colour).boxes
     assert (top.on, bottom.on) == (1, None)
     assert math.dist(top.centre, upper.centre) < 0.002
+    assert top.height_seen and bottom.height_seen
+
+
+def test_a_carton_among_lower_ones_does_not_say_its_height_is_seen():
+    """A carton with lower ones against its four sides, each of its own height: the level
+    found beside it is a neighbour's, whose top does not reach under it, so its height (taken
+    to that level) is not said to be seen."""
+    centre = box_on(P, 0.0, 0.0, (0.25, 0.25, 0.3), 0.0, TAN[0])
+    around = [box_on(P, 0.25 * dx, 0.25 * dy, (0.25, 0.25, tall), 0.0, TAN[1])
+              for (dx, dy), tall in zip(((-1, 0), (1, 0), (0, -1), (0, 1)),
+                                        (0.15, 0.2, 0.25, 0.22), strict=True)]  # fmt: skip
+    camera = tilted(1.5, 0.0)
+    depth, colour = render(Scene(camera, P, (centre, *around), seam_m=0.003))
+    found = find_boxes(depth, camera.lens, camera.camera_to_world, colour).boxes
+    ((box, _),) = match(found, (centre,))
+    assert box.size[2] < 0.3 - 0.02
+    assert not box.height_seen
 
 
 def test_what_is_seen_round_a_top():

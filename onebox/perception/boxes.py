@@ -200,8 +200,10 @@ class Box:
     hidden_sides: int = 0
     """Sides of the top another object hides: the size along them is a lower bound."""
     height_seen: bool = True
-    """Whether the level it stands on is seen beside it; when not (a carton in a full layer),
-    the height is measured to the level its neighbours stand on and is only as good as that."""
+    """Whether the level it stands on is seen beside it, on the support or on a top that
+    reaches under it (its rectangle holds the box's middle); when not (a carton in a full
+    layer, or among lower neighbours), the height is measured to the level found beside it
+    and is only as good as that."""
     name: str = ""
     """The catalogue entry its top matches, if a catalogue is used."""
 
@@ -744,6 +746,15 @@ def _report(
     order = [int(k) for k in np.argsort(-tops.height_m) if is_box[k]]
     index = {k: i for i, k in enumerate(order)}
     flatness = np.clip(1.0 - tops.rms_m / np.maximum(FLAT_SIGMAS * tops.sigma_m, FLAT_M), 0, 1)
+    # The level a box stands on is seen when it is seen beside it on the support, or on a
+    # top that reaches under the box (its rectangle holds the box's middle): a lower
+    # neighbour's level beside it, in a layer of cartons, says nothing of what is under it.
+    below = np.maximum(on, 0)
+    offset = tops.middle_ab - tops.middle_ab[below]
+    axis = tops.axis_ab[below]
+    along = np.abs(offset[:, 0] * axis[:, 0] + offset[:, 1] * axis[:, 1])
+    across = np.abs(offset[:, 1] * axis[:, 0] - offset[:, 0] * axis[:, 1])
+    reaches = (on < 0) | ((along <= tops.length_m[below] / 2) & (across <= tops.width_m[below] / 2))
     result: list[Box] = []
     for k in order:
         middle = tops.middle_ab[k]
@@ -791,7 +802,7 @@ def _report(
                 top_middle=_vec(top),
                 on=index.get(int(on[k])) if on[k] >= 0 else None,
                 hidden_sides=int(hidden.sum()),
-                height_seen=bool(seen_base.any()),
+                height_seen=bool(seen_base.any() and reaches[k]),
                 name="" if entry is None else entry.name,
             )
         )
