@@ -28,7 +28,8 @@ The pipeline, one module a physical effect:
      middle half or their middle 80 % beyond each fitted sag's noise, filling their rectangle
      and its corners (of what is seen, or covered by a top standing over it
      (:func:`_under_carried`), and a fifth of the rectangle at least; more than fill it is a
-     surface folding over itself), not cut off;
+     surface folding over itself), not cut off, not a narrow piece of a longer top (its
+     surface going on at its height past two sides: a bin's rim);
    - what each top stands on (:func:`_bases`, before the test above): the support or a lower
      top, looked for at its own height just past the top's sides, within where the top's faces
      are seen to end (:func:`_face_bottom`), or where they end on a box sticking out under
@@ -130,6 +131,13 @@ seen between nearer things says too little of the rectangle round it."""
 CORNER_FILL = 0.6
 """A box's top reaches into its rectangle's corners; a disc, a rounded tin or a bowl's bottom
 does not."""
+NARROW_PX = 15.0
+"""A top narrower than this many pixels (three of the normals' 5 x 5 windows: most of its
+pixels' windows take in its edges) falls apart along its length where its normals come and
+go..."""
+PIECE_LEVEL_SIDES = 2
+"""...so one whose surface goes on at its height past this many of its sides or more (a bin's
+rim, the corner where two rims meet) is a piece of a longer top, not a box's."""
 MIN_WIDTH_M = 0.015
 """A top narrower than this is an edge or a rim, not a box."""
 FLAT_SIGMAS = 3.0
@@ -379,6 +387,8 @@ class Round:
     lower_m: Float64Array
     """(n, 4, PROBES_PER_SIDE): the height seen past the side where it is lower than the top
     (NaN where not)."""
+    level: BoolArray
+    """The top's own surface goes on past the side at its height: no edge there."""
     seen_top: npt.NDArray[np.intp]
     """(n, 4, PROBES_PER_SIDE): the top seen at each probe's pixel (-1: none)."""
     ab: Float64Array
@@ -443,6 +453,8 @@ def _look_round(
         seen_height += support.offset_camera_m  # height along the same ray, by similar triangles
         lower = np.where(seen > z_expected + tolerance, seen_height, np.nan)
     hidden = nearer.mean(axis=2) >= HIDDEN_SHARE
+    with np.errstate(invalid="ignore"):
+        level = (np.abs(seen - z_expected) <= tolerance).mean(axis=2) >= 0.5
     unread = (np.isnan(seen) & inside).mean(axis=2) >= HIDDEN_SHARE
     cover = _covered(tops, depth_m, lens, support)
     rows, cols = tops.labels.shape
@@ -451,7 +463,7 @@ def _look_round(
     seen_top = np.where(
         in_crop, tops.labels[np.clip(vc, 0, rows - 1), np.clip(uc, 0, cols - 1)] - 1, -1
     )
-    return Round(hidden, unread, lower, seen_top, ab, cover)
+    return Round(hidden, unread, lower, level, seen_top, ab, cover)
 
 
 def _lens_array(lens: Intrinsics) -> Float64Array:
@@ -518,6 +530,11 @@ def _boxes(tops: Tops, round_: Round, settings: FinderSettings, lump_px: float) 
     fill_needed = np.maximum(settings.min_score * (1.0 - round_.covered), MIN_SEEN)
     corners_needed = CORNER_FILL * (1.0 - round_.corners_covered)
     flat = tops.rms_m <= np.maximum(FLAT_SIGMAS * tops.sigma_m, FLAT_M)
+    # A narrow top whose surface goes on at its height past two of its sides is a piece of a
+    # longer one that fell apart where its normals came and went (a bin's rim).
+    pixel = np.sqrt(tops.area_m2 / np.maximum(tops.pixels, 1))
+    narrow = tops.width_m < NARROW_PX * pixel
+    piece = narrow & (round_.level.sum(axis=1) >= PIECE_LEVEL_SIDES)
     # Each sag is fitted to its window's pixels: its noise falls with the root of how many
     # independent lumps of noise the window holds, down to a share of sigma(z) (depth errors
     # keep some structure across a top that no count of pixels averages out).
@@ -529,6 +546,7 @@ def _boxes(tops: Tops, round_: Round, settings: FinderSettings, lump_px: float) 
         & (tops.width_m >= MIN_WIDTH_M)
         & (tops.tilt_deg <= settings.max_top_tilt_deg)
         & flat
+        & ~piece
         & (tops.fill >= fill_needed)
         & (tops.fill <= MAX_FILL)
         & (tops.corners >= corners_needed)
