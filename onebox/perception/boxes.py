@@ -295,7 +295,7 @@ def find_boxes(
     round_ = _look_round(tops, origin, depth, lens, support)
     looked = _looked_at(tops, round_, lens, support)
     face_bottom, ledge = _face_bottom(tops, looked, origin, depth, lens, support)
-    base, on = _bases(tops, round_, face_bottom, ledge, depth, lens, support)
+    base, on, held = _bases(tops, round_, face_bottom, ledge, depth, lens, support)
     round_ = _under_carried(tops, round_, on)
     is_box = _boxes(tops, round_, settings, lump_px)
     # A top that several boxes stand on, and that they mostly hide or that they stand on
@@ -325,7 +325,9 @@ def find_boxes(
     platform = carries & ((round_.covered >= PLATFORM_COVERED) | (past.max(axis=1) >= 2))
     is_box &= ~platform
     return Found(
-        support, _report(tops, round_, is_box, base, on, support, camera_to_world, settings), frame
+        support,
+        _report(tops, round_, is_box, base, on, held, support, camera_to_world, settings),
+        frame,
     )
 
 
@@ -687,8 +689,9 @@ def _bases(
     depth_m: Float32Array,
     lens: Intrinsics,
     support: Support,
-) -> tuple[Float64Array, npt.NDArray[np.intp]]:
-    """The level each top stands on, and which top that is (-1: the support).
+) -> tuple[Float64Array, npt.NDArray[np.intp], BoolArray]:
+    """The level each top stands on, which top that is (-1: the support), and whether that
+    top reaches under it (its rectangle holds the top's middle; always on the support).
 
     The candidates are the support and the lower tops seen round the top, near it, or whose
     rectangle holds its middle (a lower top seen only in a gap). Each is looked for at its own
@@ -745,7 +748,8 @@ def _bases(
     unmatched = ledge & (np.abs(base - face_bottom_m) > step)
     base = np.where(unmatched, face_bottom_m, base)
     on = np.where(unmatched, -1, on)
-    return base, on
+    held = (on < 0) | holds[np.arange(n), np.maximum(on, 0)]
+    return base, on, held
 
 
 def _report(
@@ -754,6 +758,7 @@ def _report(
     is_box: BoolArray,
     base_m: Float64Array,
     on: npt.NDArray[np.intp],
+    held: BoolArray,
     support: Support,
     camera_to_world: Float64Array | None,
     settings: FinderSettings,
@@ -764,15 +769,6 @@ def _report(
     order = [int(k) for k in np.argsort(-tops.height_m) if is_box[k]]
     index = {k: i for i, k in enumerate(order)}
     flatness = np.clip(1.0 - tops.rms_m / np.maximum(FLAT_SIGMAS * tops.sigma_m, FLAT_M), 0, 1)
-    # The level a box stands on is seen when it is seen beside it on the support, or on a
-    # top that reaches under the box (its rectangle holds the box's middle): a lower
-    # neighbour's level beside it, in a layer of cartons, says nothing of what is under it.
-    below = np.maximum(on, 0)
-    offset = tops.middle_ab - tops.middle_ab[below]
-    axis = tops.axis_ab[below]
-    along = np.abs(offset[:, 0] * axis[:, 0] + offset[:, 1] * axis[:, 1])
-    across = np.abs(offset[:, 1] * axis[:, 0] - offset[:, 0] * axis[:, 1])
-    reaches = (on < 0) | ((along <= tops.length_m[below] / 2) & (across <= tops.width_m[below] / 2))
     result: list[Box] = []
     for k in order:
         middle = tops.middle_ab[k]
@@ -820,7 +816,9 @@ def _report(
                 top_middle=_vec(top),
                 on=index.get(int(on[k])) if on[k] >= 0 else None,
                 hidden_sides=int(hidden.sum()),
-                height_seen=bool(seen_base.any() and reaches[k]),
+                # Seen beside it, on the support or a top reaching under it: a lower
+                # neighbour's level, in a layer of cartons, says nothing of what is under it.
+                height_seen=bool(seen_base.any() and held[k]),
                 name="" if entry is None else entry.name,
             )
         )
