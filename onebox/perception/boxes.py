@@ -296,7 +296,7 @@ def find_boxes(
     looked = _looked_at(tops, round_, lens, support)
     face_bottom, ledge = _face_bottom(tops, looked, origin, depth, lens, support)
     base, on, held = _bases(tops, round_, face_bottom, ledge, depth, lens, support)
-    round_ = _under_carried(tops, round_, on)
+    round_ = _under_carried(tops, round_, on, held)
     is_box = _boxes(tops, round_, settings, lump_px)
     # A top that several boxes stand on, and that they mostly hide or that they stand on
     # outside its rectangle (past a side of it something hides), is a platform (a pallet's
@@ -496,18 +496,13 @@ def _covered(tops: Tops, depth_m: Float32Array, lens: Intrinsics, support: Suppo
     return nearer
 
 
-def _under_carried(tops: Tops, round_: Round, on: npt.NDArray[np.intp]) -> Round:
+def _under_carried(tops: Tops, round_: Round, on: npt.NDArray[np.intp], held: BoolArray) -> Round:
     """``round_`` with the points of each top's grid under the rectangle of a top standing on
-    it, over it (its middle within the rectangle), hidden too: what stands on a top covers
-    it, including the band round its foot whose faces rise too little above the top there to
-    be seen nearer."""
-    j = np.flatnonzero(on >= 0)
+    it, over it (``held``: its middle within the rectangle), hidden too: what stands on a top
+    covers it, including the band round its foot whose faces rise too little above the top
+    there to be seen nearer."""
+    j = np.flatnonzero((on >= 0) & held)
     k = on[j]
-    d = tops.middle_ab[j] - tops.middle_ab[k]
-    off_along = np.abs(d[:, 0] * tops.axis_ab[k, 0] + d[:, 1] * tops.axis_ab[k, 1])
-    off_across = np.abs(d[:, 1] * tops.axis_ab[k, 0] - d[:, 0] * tops.axis_ab[k, 1])
-    over = (off_along <= 0.5 * tops.length_m[k]) & (off_across <= 0.5 * tops.width_m[k])
-    j, k = j[over], k[over]
     if len(j) == 0:
         return round_
     axis_k, axis_j = tops.axis_ab[k], tops.axis_ab[j]
