@@ -64,7 +64,14 @@ cross-sections) is a stray (a spur, a smear), not the top's extent."""
 MIN_PIXELS = 12
 """Fewer pixels than this are no top (speckles), whatever their footprint."""
 JOIN_SAMPLES = 24
-"""Points looked at between two pieces of a top that something nearer may have cut apart."""
+"""Points looked at between two pieces of a top that something nearer may have cut apart..."""
+JOIN_ACROSS = 0.15
+"""...on the line between their middles and on two beside it, this share of the narrower
+piece's width to either side: a top is hidden across its width, not along one line (two tops
+that meet at a corner have something lower in one of the corners between them)."""
+JOIN_STEP = 2.5
+"""Lower than the pieces' height by this many times their tolerance, beside the middles' line,
+is a step down between two tops."""
 PINCHED_PX = 8.0
 """A top narrower than this many pixels is pinched in two where its edges' steps narrow it."""
 BORDER_PX = 3
@@ -315,26 +322,40 @@ def join_hidden(
     i, j = i[level], j[level]
     if i.size == 0:
         return None
+    # Lines (pair, line, sample): the middles' and two beside it.
+    between = tops.middle_ab[j] - tops.middle_ab[i]
+    across = between[:, ::-1] * np.array([-1.0, 1.0])
+    across *= (
+        JOIN_ACROSS
+        * np.minimum(tops.width_m[i], tops.width_m[j])
+        / np.maximum(np.hypot(*between.T), 1e-9)
+    )[:, None]
+    start = tops.middle_ab[i, None, :] + np.array([0.0, -1.0, 1.0])[None, :, None] * across[:, None]
     share = np.linspace(0.0, 1.0, JOIN_SAMPLES)
-    ab = tops.middle_ab[i, None, :] + share[None, :, None] * (
-        tops.middle_ab[j, None, :] - tops.middle_ab[i, None, :]
-    )
+    ab = start[:, :, None, :] + share[None, None, :, None] * between[:, None, None, :]
     height = 0.5 * (tops.height_m[i] + tops.height_m[j])
-    z, seen, inside, (vi, ui) = sight(ab, height[:, None], tops.basis, depth_m, lens, support)
+    z, seen, inside, (vi, ui) = sight(ab, height[:, None, None], tops.basis, depth_m, lens, support)
     label = tops.labels[vi, ui] - 1
+    slack = np.maximum(tolerance[i], tolerance[j])[:, None, None]
     with np.errstate(invalid="ignore"):
-        nearer = seen < z - np.maximum(tolerance[i], tolerance[j])[:, None]
-    own = (label == i[:, None]) | (label == j[:, None])
+        nearer = seen < z - slack
+    own = (label == i[:, None, None]) | (label == j[:, None, None])
     # ... or the same surface left out of every top (an edge pixel beside the thing nearer).
     with np.errstate(invalid="ignore"):
-        own |= (label < 0) & (np.abs(seen - z) <= np.maximum(tolerance[i], tolerance[j])[:, None])
+        own |= (label < 0) & (np.abs(seen - z) <= slack)
     unread = np.isnan(seen)  # no reading says nothing against
     # ... or, a few pixels wide, they touch all the way (pinched in two by the opening).
     narrow = tops.width_m * lens.fx / tops.depth_m < PINCHED_PX
+    # Beside that line, only a step down (something lower seen where the top would be) says
+    # against: a top that bends or leans a little is still one.
+    with np.errstate(invalid="ignore"):
+        below = seen[:, 1:] > z[:, 1:] + JOIN_STEP * slack
+    middle = (own | nearer | unread)[:, 0]
     one = (
-        inside.all(axis=1)
-        & (own | nearer | unread).all(axis=1)
-        & (nearer.any(axis=1) | (own.all(axis=1) & narrow[i] & narrow[j]))
+        inside.all(axis=(1, 2))
+        & middle.all(axis=1)
+        & ~below.any(axis=(1, 2))
+        & (nearer[:, 0].any(axis=1) | (own[:, 0].all(axis=1) & narrow[i] & narrow[j]))
     )
     if not one.any():
         return None
