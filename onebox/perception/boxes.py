@@ -28,8 +28,9 @@ The pipeline, one module a physical effect:
      middle half or their middle 80 % beyond each fitted sag's noise, filling their rectangle
      and its corners (of what is seen, or covered by a top standing over it
      (:func:`_under_carried`), and a fifth of the rectangle at least; more than fill it is a
-     surface folding over itself), not cut off, not a narrow piece of a longer top (its
-     surface going on at its height past two sides: a bin's rim);
+     surface folding over itself), not round (its outline as wide at every turn: a tin's
+     lid), not cut off, not a narrow piece of a longer top (its surface going on at its
+     height past two sides: a bin's rim);
    - what each top stands on (:func:`_bases`, before the test above): the support or a lower
      top, looked for at its own height just past the top's sides, within where the top's faces
      are seen to end (:func:`_face_bottom`), or where they end on a box sticking out under
@@ -125,6 +126,12 @@ SAG_FLOOR = 0.35
 MAX_FILL = 1.15
 """A flat top's pixels, laid on its plane, fit in its rectangle; more of them than it has
 room for is a surface folding over itself (a cup's rim with its walls inside and out)."""
+ROUND_TURNED = 0.8
+"""A top whose rectangle is more than this share of the one round its pixels turned 45 degrees
+(a rectangle's is half or less, a disc's all) is round..."""
+ROUND_SEEN_COVERED = 0.1
+"""...judged where less than this share of it is covered: the part of a top seen round a box
+standing on it has no outline of its own."""
 MIN_SEEN = 0.2
 """A top fills this share of its rectangle at least, however much of it is hidden: a sliver
 seen between nearer things says too little of the rectangle round it."""
@@ -527,6 +534,9 @@ def _boxes(tops: Tops, round_: Round, settings: FinderSettings, lump_px: float) 
     fill_needed = np.maximum(settings.min_score * (1.0 - round_.covered), MIN_SEEN)
     corners_needed = CORNER_FILL * (1.0 - round_.corners_covered)
     flat = tops.rms_m <= np.maximum(FLAT_SIGMAS * tops.sigma_m, FLAT_M)
+    # A top seen whole whose outline is about as wide at every turn is round (a tin's lid, a
+    # strip along a lying can), however full its rectangle.
+    round_top = (tops.turned > ROUND_TURNED) & (round_.covered < ROUND_SEEN_COVERED)
     # A narrow top whose surface goes on at its height past two of its sides is a piece of a
     # longer one that fell apart where its normals came and went (a bin's rim).
     pixel = np.sqrt(tops.area_m2 / np.maximum(tops.pixels, 1))
@@ -547,6 +557,7 @@ def _boxes(tops: Tops, round_: Round, settings: FinderSettings, lump_px: float) 
         & (tops.fill >= fill_needed)
         & (tops.fill <= MAX_FILL)
         & (tops.corners >= corners_needed)
+        & ~round_top
         & ~curved.any(axis=1)
     )
     if not settings.keep_cut_off:

@@ -206,6 +206,9 @@ def _profile_keep(
     return keep
 
 
+_HALF_ROOT2 = math.sqrt(0.5)
+
+
 @numba.njit(cache=True, nogil=True)
 def measure_tops(
     start: npt.NDArray[np.intp],
@@ -233,8 +236,8 @@ def measure_tops(
 
     Returns per top (n): pixels, mean depth, mean sigma, height at the rectangle's middle,
     middle (n, 2), axis (n, 2), length, width, area, fill, corners, rms, sag and sag share
-    (n, 2: over the middle half, over the middle 80 %), tilt (degrees), slope (n, 2) and the
-    points' mean a, b and h (n, 3), as
+    (n, 2: over the middle half, over the middle 80 %), tilt (degrees), slope (n, 2), the
+    points' mean a, b and h (n, 3) and the rectangle's area over the turned one's, as
     :class:`onebox.perception.tops.Tops` holds them."""
     n = len(start) - 1
     # The outline's points, top by top, for the rectangle's angle.
@@ -271,9 +274,12 @@ def measure_tops(
     tilt = np.zeros(n)
     slope = np.zeros((n, 2))
     centroid = np.zeros((n, 3))
+    turned = np.zeros(n)
     residual = np.empty(len(a))
     p = np.empty(len(a))
     q = np.empty(len(a))
+    p_turned = np.empty(len(a))
+    q_turned = np.empty(len(a))
     footprint = np.empty(len(a))
     window = np.empty((2, 2))
     sums = np.empty((2, 2, 5))
@@ -313,6 +319,7 @@ def measure_tops(
         # to lay it on the support's. One pass, each sum in order.
         squared = summed = 0.0
         start_p, end_p, start_q, end_q = np.inf, -np.inf, np.inf, -np.inf
+        start_t, end_t, start_u, end_u = np.inf, -np.inf, np.inf, -np.inf
         for i in range(lo, hi):
             da, db, dh = a[i] - mean_a, b[i] - mean_b, h[i] - mean_h
             residual[i] = dh - alpha * da - beta * db
@@ -329,6 +336,13 @@ def measure_tops(
             end_p = max(end_p, p[i])
             start_q = min(start_q, q[i])
             end_q = max(end_q, q[i])
+            # ... and along the rectangle's axes turned 45 degrees.
+            p_turned[i] = (p[i] - q[i]) * _HALF_ROOT2
+            q_turned[i] = (p[i] + q[i]) * _HALF_ROOT2
+            start_t = min(start_t, p_turned[i])
+            end_t = max(end_t, p_turned[i])
+            start_u = min(start_u, q_turned[i])
+            end_u = max(end_u, q_turned[i])
         rms[k] = np.sqrt(squared / safe)
         step = np.sqrt(summed / safe)  # one pixel's side on the plane
         # The extent along each axis over the pixels whose cross-sections are not strays
@@ -349,6 +363,22 @@ def measure_tops(
         low_q -= 0.5 * step
         high_q += 0.5 * step
         extent_p, extent_q = high_p - low_p, high_q - low_q
+        # The rectangle round the same pixels turned 45 degrees, its strays left out the same
+        # way: a round top's is no larger, a rectangle's is twice as large or more.
+        kept = _profile_keep(
+            p_turned, q_turned, lo, hi, step, profile_share, start_t, end_t, start_u, end_u
+        )
+        if not kept.any():
+            kept[:] = True
+        low_t, high_t, low_u, high_u = np.inf, -np.inf, np.inf, -np.inf
+        for i in range(lo, hi):
+            if kept[i - lo]:
+                low_t = min(low_t, p_turned[i])
+                high_t = max(high_t, p_turned[i])
+                low_u = min(low_u, q_turned[i])
+                high_u = max(high_u, q_turned[i])
+        turned_area = (high_t - low_t + step) * (high_u - low_u + step)
+        turned[k] = extent_p * extent_q / max(turned_area, 1e-12)
         mid_p, mid_q = 0.5 * (low_p + high_p), 0.5 * (low_q + high_q)
         # How full the rectangle's corners are: corner squares a fifth of the width on a side
         # (three pixels at least), a pixel in from the rectangle's sides.
@@ -432,6 +462,7 @@ def measure_tops(
         tilt,
         slope,
         centroid,
+        turned,
     )
 
 

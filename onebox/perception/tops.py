@@ -123,6 +123,9 @@ class Tops:
     """Area seen over the rectangle's."""
     corners: Float64Array
     """How full the rectangle's four corner squares are (a fifth of the width on a side)."""
+    turned: Float64Array
+    """The rectangle's area over that of the rectangle round the same pixels turned 45
+    degrees: about 1 for a round top, as wide at every turn; 0.5 or less for a rectangle."""
     rms_m: Float64Array
     """How far the top's points lie off its plane (root mean square)."""
     sag_m: Float64Array
@@ -475,6 +478,7 @@ def _measure(
             before.tilt_deg,
             before.slope_ab,
             before.centroid_abh,
+            before.turned,
         )
         merged = []
         for new, old in zip(measured, known, strict=True):
@@ -501,6 +505,7 @@ def _measure(
         tilt,
         slope,
         centroid,
+        turned,
     ) = measured
     # Runs along the picture's edge: its extent past it is unknown.
     on_border = kernels.border_spans(labels, BORDER_PX, n) >= ALONG_BORDER_PX
@@ -514,6 +519,7 @@ def _measure(
         area_m2=area,
         fill=fill,
         corners=corners,
+        turned=turned,
         rms_m=rms,
         sag_m=sag,
         sag_share=sag_share,
