@@ -206,6 +206,34 @@ def _profile_keep(
     return keep
 
 
+@numba.njit(cache=True, nogil=True)
+def _kept_extent(
+    p: Float64Array,
+    q: Float64Array,
+    lo: int,
+    hi: int,
+    step: float,
+    share: float,
+    start_p: float,
+    end_p: float,
+    start_q: float,
+    end_q: float,
+) -> tuple[npt.NDArray[np.bool_], float, float, float, float]:
+    """:func:`_profile_keep` (all of the pixels if it keeps none), and the kept pixels' least
+    and greatest ``p`` and ``q``."""
+    keep = _profile_keep(p, q, lo, hi, step, share, start_p, end_p, start_q, end_q)
+    if not keep.any():
+        keep[:] = True
+    low_p, high_p, low_q, high_q = np.inf, -np.inf, np.inf, -np.inf
+    for i in range(lo, hi):
+        if keep[i - lo]:
+            low_p = min(low_p, p[i])
+            high_p = max(high_p, p[i])
+            low_q = min(low_q, q[i])
+            high_q = max(high_q, q[i])
+    return keep, low_p, high_p, low_q, high_q
+
+
 _HALF_ROOT2 = math.sqrt(0.5)
 
 
@@ -347,16 +375,11 @@ def measure_tops(
         step = np.sqrt(summed / safe)  # one pixel's side on the plane
         # The extent along each axis over the pixels whose cross-sections are not strays
         # (all of them if none is kept).
-        keep = _profile_keep(p, q, lo, hi, step, profile_share, start_p, end_p, start_q, end_q)
-        if not keep.any():
-            keep[:] = True
-        low_p, high_p, low_q, high_q = np.inf, -np.inf, np.inf, -np.inf
+        keep, low_p, high_p, low_q, high_q = _kept_extent(
+            p, q, lo, hi, step, profile_share, start_p, end_p, start_q, end_q
+        )
         for i in range(lo, hi):
             if keep[i - lo]:
-                low_p = min(low_p, p[i])
-                high_p = max(high_p, p[i])
-                low_q = min(low_q, q[i])
-                high_q = max(high_q, q[i])
                 area[k] += footprint[i]
         low_p -= 0.5 * step
         high_p += 0.5 * step
@@ -365,18 +388,9 @@ def measure_tops(
         extent_p, extent_q = high_p - low_p, high_q - low_q
         # The rectangle round the same pixels turned 45 degrees, its strays left out the same
         # way: a round top's is no larger, a rectangle's is twice as large or more.
-        kept = _profile_keep(
+        _, low_t, high_t, low_u, high_u = _kept_extent(
             p_turned, q_turned, lo, hi, step, profile_share, start_t, end_t, start_u, end_u
         )
-        if not kept.any():
-            kept[:] = True
-        low_t, high_t, low_u, high_u = np.inf, -np.inf, np.inf, -np.inf
-        for i in range(lo, hi):
-            if kept[i - lo]:
-                low_t = min(low_t, p_turned[i])
-                high_t = max(high_t, p_turned[i])
-                low_u = min(low_u, q_turned[i])
-                high_u = max(high_u, q_turned[i])
         turned_area = (high_t - low_t + step) * (high_u - low_u + step)
         turned[k] = extent_p * extent_q / max(turned_area, 1e-12)
         mid_p, mid_q = 0.5 * (low_p + high_p), 0.5 * (low_q + high_q)
