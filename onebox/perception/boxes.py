@@ -534,8 +534,8 @@ def _boxes(tops: Tops, round_: Round, settings: FinderSettings, lump_px: float) 
     fill_needed = np.maximum(settings.min_score * (1.0 - round_.covered), MIN_SEEN)
     corners_needed = CORNER_FILL * (1.0 - round_.corners_covered)
     flat = tops.rms_m <= np.maximum(FLAT_SIGMAS * tops.sigma_m, FLAT_M)
-    # A top seen whole whose outline is about as wide at every turn is round (a tin's lid, a
-    # strip along a lying can), however full its rectangle.
+    # A top seen whole whose outline is about as wide at every turn is round (a tin's lid),
+    # however full its rectangle.
     round_top = (tops.turned > ROUND_TURNED) & (round_.covered < ROUND_SEEN_COVERED)
     # A narrow top whose surface goes on at its height past two of its sides is a piece of a
     # longer one that fell apart where its normals came and went (a bin's rim).

@@ -17,8 +17,8 @@ How:
 2. **Connected regions** of them (4-connected, OpenCV), the pixels cut at steps or whose
    normals the smoothing turned grown back into the region beside them when at its height
    (:func:`onebox.perception.kernels.grow`, a few pixels).
-3. **Pieces of one top joined** (:func:`join_hidden`) where something nearer cut them apart and
-   their planes meet.
+3. **Pieces of one top joined** (:func:`join_hidden`) where something nearer cut them apart,
+   their planes meet and nothing lower shows where the top between them would be.
 4. **Seams seen only in colour**: two touching cartons of one height are one region in depth;
    the thin dark line between them (or a colour edge) runs straight across the region from
    side to side, which print and labels do not. Every region is split where such a line
@@ -303,7 +303,7 @@ def join_hidden(
     Two pieces are one top when they lie at one height and everything seen on the line between
     their middles, at that height, is one of them, that height left out of every top, or
     something nearer hiding it (at least one point of it: pieces that meet without anything in
-    front were cut apart for a reason)."""
+    front were cut apart for a reason), and nothing seen on two lines beside it steps down."""
     n = len(tops)
     if n < 2:
         return None
@@ -355,7 +355,7 @@ def join_hidden(
         below = seen[:, 1:] > z[:, 1:] + JOIN_STEP * slack
     middle = (own | nearer | unread)[:, 0]
     one = (
-        inside.all(axis=(1, 2))
+        inside[:, 0].all(axis=1)
         & middle.all(axis=1)
         & ~below.any(axis=(1, 2))
         & (nearer[:, 0].any(axis=1) | (own[:, 0].all(axis=1) & narrow[i] & narrow[j]))
