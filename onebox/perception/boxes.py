@@ -128,7 +128,7 @@ MAX_FILL = 1.15
 room for is a surface folding over itself (a cup's rim with its walls inside and out)."""
 ROUND_TURNED = 0.8
 """A top whose rectangle is more than this share of the one round its pixels turned 45 degrees
-(a rectangle's is half or less, a disc's all) is round..."""
+(a disc's is all of it, a square's two thirds, a longer rectangle's less) is round..."""
 ROUND_SEEN_COVERED = 0.1
 """...judged where less than this share of it is covered: the part of a top seen round a box
 standing on it has no outline of its own."""

@@ -387,7 +387,7 @@ def measure_tops(
         high_q += 0.5 * step
         extent_p, extent_q = high_p - low_p, high_q - low_q
         # The rectangle round the same pixels turned 45 degrees, its strays left out the same
-        # way: a round top's is no larger, a rectangle's is twice as large or more.
+        # way: a round top's is no larger, a square's half as large again, a longer one's more.
         _, low_t, high_t, low_u, high_u = _kept_extent(
             p_turned, q_turned, lo, hi, step, profile_share, start_t, end_t, start_u, end_u
         )

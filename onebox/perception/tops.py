@@ -125,7 +125,8 @@ class Tops:
     """How full the rectangle's four corner squares are (a fifth of the width on a side)."""
     turned: Float64Array
     """The rectangle's area over that of the rectangle round the same pixels turned 45
-    degrees: about 1 for a round top, as wide at every turn; 0.5 or less for a rectangle."""
+    degrees, strays left out of both: about 1 for a round top, as wide at every turn; two
+    thirds for a square (the turned one's thin tips are strays), less for a longer one."""
     rms_m: Float64Array
     """How far the top's points lie off its plane (root mean square)."""
     sag_m: Float64Array
