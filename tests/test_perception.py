@@ -649,6 +649,30 @@ def test_two_cartons_meeting_at_a_corner_are_two_boxes():
             assert box.size[:2] == pytest.approx(true.size[:2], abs=0.015), (noise, sizes)
 
 
+def test_a_bin_seen_from_close_over_it_stands_on_the_floor_round_it():
+    """A tote with a 4 cm floor and three cartons in it, 0.8 m straight down, through a D435's
+    noise: the floor round the tote is a sixth of the picture, and no plane through three
+    readings anywhere held a tenth of them, so nothing was found. With the camera's pose the
+    support is about level: the lowest height a tenth of the readings share is the floor.
+    Every carton is found, its height over the tote's floor."""
+    blue = (50, 75, 150)
+    bottom = box_on(P, 0.0, 0.0, (0.6, 0.4, 0.04), 0.0, blue)
+    walls = [box_on(bottom, 0.0, s * 0.1875, (0.6, 0.025, 0.22), 0.0, blue) for s in (-1, 1)]
+    walls += [box_on(bottom, s * 0.2875, 0.0, (0.025, 0.35, 0.22), 0.0, blue) for s in (-1, 1)]
+    cartons = (
+        box_on(bottom, -0.15, -0.05, (0.2, 0.15, 0.12), 20.0, TAN[0]),
+        box_on(bottom, 0.12, 0.05, (0.22, 0.16, 0.18), 0.0, (200, 190, 150)),
+        box_on(bottom, 0.14, -0.1, (0.18, 0.08, 0.1), 0.0, TAN[1]),
+    )
+    camera = tilted(0.8, 0.0)
+    depth, colour = render(Scene(camera, P, (bottom, *walls, *cartons)))
+    found = find_boxes(noisy(depth, "d435", 0), camera.lens, camera.camera_to_world, colour)
+    assert found.support is not None and abs(found.support.offset_m) < 0.005
+    for box, true in match(found.boxes, cartons):
+        assert math.dist(box.top_middle, true.top_middle) < 0.01
+        assert box.size[2] == pytest.approx(true.size[2], abs=0.005)
+
+
 def test_a_carton_among_lower_ones_does_not_say_its_height_is_seen():
     """A carton with lower ones against its four sides, each of its own height: the level
     found beside it is a neighbour's, whose top does not reach under it, so its height (taken

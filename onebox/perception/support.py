@@ -16,8 +16,11 @@ How:
   plane sets "up". Up to three planes are found in turn; among those holding at least
   ``MIN_SHARE`` of the readings and facing the same way the LOWEST is the support (the floor
   under a pallet, the table under the boxes; carton tops are never the support even when they
-  are the largest plane). What stands on a higher plateau (a pallet, a table seen with the floor
-  around it) is measured from that plateau by the box finder, not from the support.
+  are the largest plane). With a pose, when no plane through three readings holds that share
+  (the floor round a bin seen from close over it, which few triples fall on), the lowest height
+  along "up" that the share of the readings holds is fitted instead. What stands on a higher
+  plateau (a pallet, a table seen with the floor around it) is measured from that plateau by
+  the box finder, not from the support.
 - ``table_z_m`` skips the fit: the support is the world plane z = table_z.
 
 The plane is ``normal . p + offset_m = 0`` with the normal pointing up, toward the camera, so
@@ -175,6 +178,26 @@ def _ransac(
     return normals[best], float(offsets[best])
 
 
+def _lowest_level(
+    points: Float64Array, up: Float64Array, band: Float64Array
+) -> npt.NDArray[np.bool_] | None:
+    """The readings at the lowest height along ``up`` that ``MIN_SHARE`` of them share within
+    their band (its median), or None."""
+    height = points @ up
+    order = np.argsort(height)
+    ordered = height[order]
+    width = median(band)
+    low = np.searchsorted(ordered, ordered - width)
+    high = np.searchsorted(ordered, ordered + width, side="right")
+    enough = high - low >= MIN_SHARE * len(points)
+    if not enough.any():
+        return None
+    first = int(np.argmax(enough))
+    densest = first + int(np.argmax((high - low)[first : high[first]]))
+    result: npt.NDArray[np.bool_] = np.abs(height - ordered[densest]) < width
+    return result
+
+
 def _least_squares(
     points: Float64Array, inliers: npt.NDArray[np.bool_]
 ) -> tuple[Float64Array, float, float]:
@@ -323,6 +346,18 @@ def fit_support(
         # Take out a wider band than the inliers, so the next round finds another plane.
         wide = np.abs(sub @ normal + offset) < 2.0 * band
         remaining[left[wide | inliers]] = False
+    if not candidates and camera_to_world is not None and up is not None:
+        # No plane through three readings held enough (the floor round a bin seen from close
+        # over it: a tenth of the readings or so, which few triples fall on). With a pose the
+        # support is about level: the lowest height enough readings share.
+        level = _lowest_level(points, up, _initial_threshold(points[:, 2], noise_sigma_m, quantum))
+        if level is not None:
+            normal, offset, sigma, distance, inliers = _refine(
+                points, level, noise_sigma_m, quantum
+            )
+            share = float(inliers.sum()) / len(points)
+            if share >= MIN_SHARE and float(normal @ up) >= min_cos:
+                candidates.append((normal, offset, share, sigma, distance))
     if not candidates:
         return None
     assert up is not None
