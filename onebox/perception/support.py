@@ -16,9 +16,10 @@ How:
   plane sets "up". Up to three planes are found in turn; among those holding at least
   ``MIN_SHARE`` of the readings and facing the same way the LOWEST is the support (the floor
   under a pallet, the table under the boxes; carton tops are never the support even when they
-  are the largest plane). With a pose, when no plane through three readings holds that share
-  (the floor round a bin seen from close over it, which few triples fall on), the lowest height
-  along "up" that the share of the readings holds is fitted instead. What stands on a higher
+  are the largest plane). When no plane through three readings holds that share (the floor
+  round a bin seen from close over it, which few triples fall on), the support is about level:
+  the lowest height that share of the readings holds, along the pose's up or, without a pose,
+  the way most small patches of the picture face, is fitted instead. What stands on a higher
   plateau (a pallet, a table seen with the floor around it) is measured from that plateau by
   the box finder, not from the support.
 - ``table_z_m`` skips the fit: the support is the world plane z = table_z.
@@ -50,6 +51,15 @@ FAR_SHARE = 4.0
 """Readings farther than this many times the median distance are strays, not the support."""
 MIN_SHARE = 0.10
 """A plane holding less than this share of the readings is not a support candidate."""
+LEVEL_WIDEN = 4.0
+"""When no plane through three readings holds that share, the lowest level height is looked
+for in a band this many times theirs first ("up" may lean by a degree or two)..."""
+FACING_PATCHES = 600
+"""...and without a pose "up" is the way most of this many small patches face..."""
+PATCH_CELLS = 3
+"""...each three readings within this many cells of the sample's grid of one another..."""
+FACING_DEG = 10.0
+"""...averaged over the patches within this angle of the most common way."""
 MAX_LUMP_PX = 8.0
 """The widest lumps measured: past this a plane's residuals tell little more (a wave, a
 quantisation step held flat over many pixels)."""
@@ -198,6 +208,59 @@ def _lowest_level(
     return result
 
 
+def _level(
+    points: Float64Array,
+    up: Float64Array,
+    band: Float64Array,
+    sigma_m: float | None,
+    quantum_m2: float,
+) -> tuple[Float64Array, float, float, float, float] | None:
+    """The plane at the lowest height along ``up`` that ``MIN_SHARE`` of the readings share:
+    found in a band ``LEVEL_WIDEN`` times theirs (``up`` may lean a little), fitted (see
+    :func:`_refine`), then found again along the fitted normal in their band and fitted.
+    (normal, offset, share, sigma, distance), or None."""
+    widen = LEVEL_WIDEN
+    for _ in range(2):
+        level = _lowest_level(points, up, widen * band)
+        if level is None:
+            return None
+        up, offset, sigma, distance, inliers = _refine(points, level, sigma_m, quantum_m2)
+        widen = 1.0
+    share = float(inliers.sum()) / len(points)
+    return (up, offset, share, sigma, distance) if share >= MIN_SHARE else None
+
+
+def _most_faced(
+    points: Float64Array, index: IntArray, shape: tuple[int, int], rng: np.random.Generator
+) -> Float64Array:
+    """The way most small patches of the picture face, toward the camera: the normals of
+    ``FACING_PATCHES`` triples of readings within ``PATCH_CELLS`` of one another on the
+    sample's grid, averaged over those within ``FACING_DEG`` of the one with the most such
+    neighbours."""
+    rows, width = shape
+    stride = max(1, int(math.sqrt(rows * width / SAMPLE_POINTS)))  # as _sample takes it
+    grid = np.stack([index // width // stride, index % width // stride], axis=1)
+    cells_shape = grid.max(axis=0) + 1
+    cells = np.full(cells_shape, -1, dtype=np.intp)
+    cells[grid[:, 0], grid[:, 1]] = np.arange(len(points))
+    first = rng.integers(0, len(points), FACING_PATCHES)
+    at = grid[first][:, None, :] + rng.integers(-PATCH_CELLS, PATCH_CELLS + 1, (len(first), 2, 2))
+    inside = ((at >= 0) & (at < cells_shape)).all(axis=-1)
+    row = np.clip(at[..., 0], 0, cells_shape[0] - 1)
+    column = np.clip(at[..., 1], 0, cells_shape[1] - 1)
+    other = np.where(inside, cells[row, column], -1)
+    whole = (other >= 0).all(axis=1)
+    a, b, c = points[first[whole]], points[other[whole, 0]], points[other[whole, 1]]
+    normals = np.cross(b - a, c - a)
+    length = np.linalg.norm(normals, axis=1)
+    normals = normals[length > 1e-12] / length[length > 1e-12, None]
+    normals[normals[:, 2] > 0] *= -1  # toward the camera, which looks along +z
+    near = normals @ normals.T > math.cos(math.radians(FACING_DEG))
+    mean = normals[near[int(near.sum(axis=1).argmax())]].mean(axis=0)
+    result: Float64Array = mean / np.linalg.norm(mean)
+    return result
+
+
 def _least_squares(
     points: Float64Array, inliers: npt.NDArray[np.bool_]
 ) -> tuple[Float64Array, float, float]:
@@ -288,7 +351,7 @@ def fit_support(
     seed: int = 0,
 ) -> Support | None:
     """The support plane (see the module docstring), or None when no plane is found."""
-    points, _ = _sample(depth_m, lens)
+    points, index = _sample(depth_m, lens)
     if table_z_m is not None:
         if camera_to_world is None:
             raise ValueError("table_z_m needs the camera's pose (camera_to_world), got None")
@@ -313,7 +376,8 @@ def fit_support(
         return None
     # Stray readings far beyond the scene (a stereo camera's mismatches at tens of metres)
     # would be within any plane's band there, the band growing as z^2: leave them out.
-    points = points[points[:, 2] < FAR_SHARE * median(points[:, 2])]
+    near = points[:, 2] < FAR_SHARE * median(points[:, 2])
+    points, index = points[near], index[near]
     if len(points) < 30:
         return None
     rng = np.random.default_rng(seed)
@@ -346,18 +410,18 @@ def fit_support(
         # Take out a wider band than the inliers, so the next round finds another plane.
         wide = np.abs(sub @ normal + offset) < 2.0 * band
         remaining[left[wide | inliers]] = False
-    if not candidates and camera_to_world is not None and up is not None:
+    if not candidates:
         # No plane through three readings held enough (the floor round a bin seen from close
-        # over it: a tenth of the readings or so, which few triples fall on). With a pose the
-        # support is about level: the lowest height enough readings share.
-        level = _lowest_level(points, up, _initial_threshold(points[:, 2], noise_sigma_m, quantum))
-        if level is not None:
-            normal, offset, sigma, distance, inliers = _refine(
-                points, level, noise_sigma_m, quantum
-            )
-            share = float(inliers.sum()) / len(points)
-            if share >= MIN_SHARE and float(normal @ up) >= min_cos:
-                candidates.append((normal, offset, share, sigma, distance))
+        # over it: a tenth of the readings or so, which few triples fall on). The support is
+        # about level: the lowest height enough readings share, along the pose's up, or without
+        # one along the way most small patches of the picture face (floor, tops and rims).
+        band = _initial_threshold(points[:, 2], noise_sigma_m, quantum)
+        if camera_to_world is None:
+            up = _most_faced(points, index, (depth_m.shape[0], depth_m.shape[1]), rng)
+        assert up is not None
+        level = _level(points, up, band, noise_sigma_m, quantum)
+        if level is not None and float(level[0] @ up) >= min_cos:
+            candidates.append(level)
     if not candidates:
         return None
     assert up is not None
