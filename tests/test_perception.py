@@ -586,21 +586,31 @@ def test_a_box_on_a_box_says_what_it_stands_on():
     assert top.height_seen and bottom.height_seen
 
 
+def tote(floor_m: float, wall_m: float) -> tuple[tuple[Box, ...], tuple[Box, ...]]:
+    """A tote 0.6 x 0.4 m, 0.22 m walls ``wall_m`` thick on a floor ``floor_m`` thick, and the
+    three cartons in it: (the tote's parts, the cartons)."""
+    blue = (50, 75, 150)
+    bottom = box_on(P, 0.0, 0.0, (0.6, 0.4, floor_m), 0.0, blue)
+    inside = (0.6 - 2 * wall_m, 0.4 - 2 * wall_m)
+    walls = [box_on(bottom, 0.0, s * (0.2 - wall_m / 2), (0.6, wall_m, 0.22), 0.0, blue)
+             for s in (-1, 1)]  # fmt: skip
+    walls += [box_on(bottom, s * (0.3 - wall_m / 2), 0.0, (wall_m, inside[1], 0.22), 0.0, blue)
+              for s in (-1, 1)]  # fmt: skip
+    cartons = (
+        box_on(bottom, -0.15, -0.05, (0.2, 0.15, 0.12), 20.0, TAN[0]),
+        box_on(bottom, 0.12, 0.05, (0.22, 0.16, 0.18), 0.0, (200, 190, 150)),
+        box_on(bottom, 0.14, -0.12, (0.18, 0.08, 0.1), 0.0, TAN[1]),
+    )
+    return (bottom, *walls), cartons
+
+
 def test_a_bins_rim_is_no_box():
     """A tote with walls 15 mm thick, three cartons in it, a metre away through a D435's
     noise: the rim falls apart into pieces where its normals come and go, each going on at its
     height past its ends. Every carton is found and nothing at the rim's height."""
-    blue = (50, 75, 150)
-    floor = box_on(P, 0.0, 0.0, (0.6, 0.4, 0.015), 0.0, blue)
-    walls = [box_on(floor, 0.0, s * 0.1925, (0.6, 0.015, 0.22), 0.0, blue) for s in (-1, 1)]
-    walls += [box_on(floor, s * 0.2925, 0.0, (0.015, 0.37, 0.22), 0.0, blue) for s in (-1, 1)]
-    cartons = (
-        box_on(floor, -0.15, -0.05, (0.2, 0.15, 0.12), 20.0, TAN[0]),
-        box_on(floor, 0.12, 0.05, (0.22, 0.16, 0.18), 0.0, (200, 190, 150)),
-        box_on(floor, 0.14, -0.12, (0.18, 0.08, 0.1), 0.0, TAN[1]),
-    )
+    parts, cartons = tote(0.015, 0.015)
     camera = tilted(0.9, 20.0)
-    depth, colour = render(Scene(camera, P, (floor, *walls, *cartons)))
+    depth, colour = render(Scene(camera, P, (*parts, *cartons)))
     for seed in (0, 1):
         found = find_boxes(noisy(depth, "d435", seed), camera.lens, camera.camera_to_world,
                            colour).boxes  # fmt: skip
@@ -656,17 +666,9 @@ def test_a_bin_seen_from_close_over_it_stands_on_the_floor_round_it():
     the lowest height a tenth of the readings share is the floor, along the pose's up, or
     without a pose along the way most small patches face. Every carton is found, its height
     over the tote's floor."""
-    blue = (50, 75, 150)
-    bottom = box_on(P, 0.0, 0.0, (0.6, 0.4, 0.04), 0.0, blue)
-    walls = [box_on(bottom, 0.0, s * 0.1875, (0.6, 0.025, 0.22), 0.0, blue) for s in (-1, 1)]
-    walls += [box_on(bottom, s * 0.2875, 0.0, (0.025, 0.35, 0.22), 0.0, blue) for s in (-1, 1)]
-    cartons = (
-        box_on(bottom, -0.15, -0.05, (0.2, 0.15, 0.12), 20.0, TAN[0]),
-        box_on(bottom, 0.12, 0.05, (0.22, 0.16, 0.18), 0.0, (200, 190, 150)),
-        box_on(bottom, 0.14, -0.1, (0.18, 0.08, 0.1), 0.0, TAN[1]),
-    )
+    parts, cartons = tote(0.04, 0.025)
     camera = tilted(0.8, 0.0)
-    depth, colour = render(Scene(camera, P, (bottom, *walls, *cartons)))
+    depth, colour = render(Scene(camera, P, (*parts, *cartons)))
     for pose in (camera.camera_to_world, None):
         found = find_boxes(noisy(depth, "d435", 0), camera.lens, pose, colour)
         assert found.support is not None
