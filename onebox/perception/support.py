@@ -232,11 +232,11 @@ def _level(
 
 def _most_faced(
     points: Float64Array, index: IntArray, shape: tuple[int, int], rng: np.random.Generator
-) -> Float64Array:
+) -> Float64Array | None:
     """The way most small patches of the picture face, toward the camera: the normals of
     ``FACING_PATCHES`` triples of readings within ``PATCH_CELLS`` of one another on the
     sample's grid, averaged over those within ``FACING_DEG`` of the one with the most such
-    neighbours."""
+    neighbours; None when no three such readings make a plane."""
     rows, width = shape
     stride = max(1, int(math.sqrt(rows * width / SAMPLE_POINTS)))  # as _sample takes it
     grid = np.stack([index // width // stride, index % width // stride], axis=1)
@@ -254,6 +254,8 @@ def _most_faced(
     normals = np.cross(b - a, c - a)
     length = np.linalg.norm(normals, axis=1)
     normals = normals[length > 1e-12] / length[length > 1e-12, None]
+    if len(normals) == 0:
+        return None
     normals[normals[:, 2] > 0] *= -1  # toward the camera, which looks along +z
     near = normals @ normals.T > math.cos(math.radians(FACING_DEG))
     mean = normals[near[int(near.sum(axis=1).argmax())]].mean(axis=0)
@@ -418,9 +420,8 @@ def fit_support(
         band = _initial_threshold(points[:, 2], noise_sigma_m, quantum)
         if camera_to_world is None:
             up = _most_faced(points, index, (depth_m.shape[0], depth_m.shape[1]), rng)
-        assert up is not None
-        level = _level(points, up, band, noise_sigma_m, quantum)
-        if level is not None and float(level[0] @ up) >= min_cos:
+        level = None if up is None else _level(points, up, band, noise_sigma_m, quantum)
+        if level is not None and up is not None and float(level[0] @ up) >= min_cos:
             candidates.append(level)
     if not candidates:
         return None
