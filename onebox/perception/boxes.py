@@ -539,7 +539,7 @@ def _boxes(tops: Tops, round_: Round, settings: FinderSettings, lump_px: float) 
     round_top = (tops.turned > ROUND_TURNED) & (round_.covered < ROUND_SEEN_COVERED)
     # A narrow top whose surface goes on at its height past two of its sides is a piece of a
     # longer one that fell apart where its normals came and went (a bin's rim).
-    pixel = np.sqrt(tops.area_m2 / np.maximum(tops.pixels, 1))
+    pixel = tops.pixel_m
     narrow = tops.width_m < NARROW_PX * pixel
     piece = narrow & (round_.level.sum(axis=1) >= PIECE_LEVEL_SIDES)
     # Each sag is fitted to its window's pixels: its noise falls with the root of how many

@@ -162,7 +162,7 @@ def split_at_seams(
     rise = np.concatenate([[np.inf], tops.height_m + np.maximum(4.0 * tops.sigma_m, RISE_M)])
     highest = cv2.dilate(np.nan_to_num(height_m, nan=-np.inf), _BESIDE)
     beside = (highest > rise[tops.labels]).ravel()[index]
-    pixel = np.sqrt(tops.area_m2 / np.maximum(tops.pixels, 1))
+    pixel = tops.pixel_m
     coordinate = _cut_coordinate(tops, cut_along)
     on_line = cut_top[top] & (np.abs(coordinate - cut_at[top]) <= pixel[top])
     line = np.bincount(top[on_line], minlength=len(tops))

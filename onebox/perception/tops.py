@@ -156,6 +156,12 @@ class Tops:
     def __len__(self) -> int:
         return len(self.height_m)
 
+    @property
+    def pixel_m(self) -> Float64Array:
+        """(n,): a pixel's side on each top's plane, on average (its area over its pixels)."""
+        result: Float64Array = np.sqrt(self.area_m2 / np.maximum(self.pixels, 1))
+        return result
+
 
 def plane_basis(support: Support) -> Float64Array:
     """Two unit vectors in the support plane and its normal (rows), in the optical frame: e1
@@ -266,7 +272,7 @@ def split_at_corners(
     grid_u, grid_v = np.meshgrid(share, share, indexing="ij")
     u = grid_u * np.where(cut_along[k], tops.length_m[k], tops.width_m[k])[:, None, None]
     v = grid_v * np.where(cut_along[k], tops.width_m[k], tops.length_m[k])[:, None, None]
-    step = np.sqrt(tops.area_m2[k] / np.maximum(tops.pixels[k], 1))[:, None, None]
+    step = tops.pixel_m[k][:, None, None]
     p = parts[k][:, None, None, :]
     inside = (
         (u >= p[..., 0] - step) & (u <= p[..., 1] + step)
