@@ -21,7 +21,9 @@ and its colour_sigma's noise to the colour, and publishes (keys under ``--namesp
   tf_static                      TFMessage world -> camera_link -> camera_optical_frame, latched
 
 Every message of one capture carries the same stamp: the simulated time of the capture. Runs in
-real time by default, as fast as it can with --fast, and stops after --frames captures if given.
+real time by default, dropping a picture a subscriber is too slow for (newest wins); as fast as
+it can with --fast, where every picture waits for room and none is dropped; and stops after
+--frames captures if given.
 --write-scene FILE.toml writes the world it would simulate as a scene file and exits.
 Settings (flag > environment variable > config/onebox.toml > default) are listed below.
 """
@@ -41,6 +43,7 @@ from typing import Any
 import mujoco
 import numpy as np
 import numpy.typing as npt
+import zenoh
 
 from onebox import bus, pictures, settings
 from onebox.errors import SceneError, SettingError
@@ -146,7 +149,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     settings.add(run, "gui", False, "also open MuJoCo's own window (needs a display)")
     run.add_argument("--frames", type=int, metavar="N", help="stop after N captures")
     run.add_argument(
-        "--fast", action="store_true", help="as fast as possible instead of in real time"
+        "--fast",
+        action="store_true",
+        help="as fast as it can instead of in real time, dropping no picture",
     )
 
 
@@ -299,12 +304,18 @@ def main(args: argparse.Namespace) -> int:
     period_s = 1.0 / run.rate_hz
     steps_per_capture = max(1, round(period_s / model.opt.timestep))
 
+    # In real time a late picture is worth nothing and is dropped when the way out stays full
+    # (newest wins). As fast as it can, the sim has no time to keep: every picture waits for
+    # room, as a replay's do, so a busy machine slows the run rather than losing captures.
+    pictures_qos = zenoh.CongestionControl.BLOCK if run.fast else None
     with bus.open_bus(args) as b, SceneRenderer(model, specs) as renderer:
         pubs = [
             CameraPublishers(
                 spec=cam,
-                colour=b.publisher(f"{cam.name}/image_raw", Image),
-                depth=b.publisher(f"{cam.name}/depth/image_raw", Image),
+                colour=b.publisher(f"{cam.name}/image_raw", Image, congestion_control=pictures_qos),
+                depth=b.publisher(
+                    f"{cam.name}/depth/image_raw", Image, congestion_control=pictures_qos
+                ),
                 info=b.publisher(f"{cam.name}/camera_info", CameraInfo),
                 pose=b.publisher(f"{cam.name}/pose", TransformStamped),
                 noise=DepthNoise(scene.noise, (cam.height, cam.width), stream=i),

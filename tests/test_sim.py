@@ -41,8 +41,9 @@ SEED_PATCH = "\n".join(["0.400 0.400 0.400 0.373 0.340 0.340 0.340 0.340"] * 5)
 class Run:
     """Everything one sim run published, decoded by key."""
 
-    def __init__(self, items: list[tuple[str, bytes]]) -> None:
+    def __init__(self, items: list[tuple[str, bytes]], log: str = "") -> None:
         self.items = items
+        self.log = log
 
     def all(self, key: str) -> list[Message]:
         message_type = {
@@ -61,7 +62,9 @@ class Run:
         return [codec(message_type).decode(p) for k, p in self.items if k == key]
 
     def first(self, key: str) -> Message:
-        return self.all(key)[0]
+        found = self.all(key)
+        assert found, f"nothing on {key}; the sim said:\n{self.log}"
+        return found[0]
 
 
 def run_sim(
@@ -81,7 +84,7 @@ def run_sim(
         inbox.wait(has_key("tf_static"))
         out, _ = proc.communicate(timeout=30)
         assert "captures in" in out, out
-    return Run(inbox.items)
+    return Run(inbox.items, out)
 
 
 @pytest.fixture(scope="module")
