@@ -98,9 +98,6 @@ NOTCH_GRID = 12
 """Points looked at across the whole's rectangle each way, for what the parts leave of it."""
 CORNER_ROUNDS = 2
 """Cutting at inward corners and measuring again, at most this often."""
-SEAM_ROUNDS = 3
-"""Splitting at seams and measuring again, at most this often (a seam that crosses one part
-only shows once the other is split off)."""
 
 
 @dataclass(frozen=True)
@@ -224,12 +221,14 @@ def find_tops(
     joined = join_hidden(tops, depth_m, lens, support)
     if joined is not None:
         tops = _measure(joined, depth_m, surface, lens, basis, tops)
-    if seam is not None:
-        for _ in range(SEAM_ROUNDS):
-            split = seams.split_at_seams(tops, seam[0], seam[1], surface.height_m)
-            if split is None:
-                break
-            tops = _measure(split, depth_m, surface, lens, basis, tops)
+    # Split at seams and measured again until no seam crosses a top: a round cuts each top
+    # once, and a seam that crosses one part only shows once the other is split off. (Each
+    # cut leaves a part at least seams.MIN_PART_M wide either side, so this ends.)
+    while seam is not None:
+        split = seams.split_at_seams(tops, seam[0], seam[1], surface.height_m)
+        if split is None:
+            break
+        tops = _measure(split, depth_m, surface, lens, basis, tops)
     for _ in range(CORNER_ROUNDS):
         split = split_at_corners(tops, depth_m, lens, support)
         if split is None:
