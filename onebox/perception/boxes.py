@@ -27,10 +27,9 @@ The pipeline, one module a physical effect:
    - which tops are boxes (:func:`_boxes`): large enough, level, flat, not curved over their
      middle half or their middle 80 % beyond each fitted sag's noise, filling their rectangle
      and its corners (of what is seen, or covered by a top standing over it
-     (:func:`_under_carried`), and a fifth of the rectangle at least; more than fill it is a
-     surface folding over itself), not round (its outline as wide at every turn: a tin's
-     lid), not cut off, not a narrow piece of a longer top (its surface going on at its
-     height past two sides: a bin's rim);
+     (:func:`_under_carried`), and a fifth of the rectangle at least), not round (its
+     outline as wide at every turn: a tin's lid), not cut off, not a narrow piece of a longer
+     top (its surface going on at its height past two sides: a bin's rim);
    - what each top stands on (:func:`_bases`, before the test above): the support or a lower
      top, looked for at its own height just past the top's sides, within where the top's faces
      are seen to end (:func:`_face_bottom`), or where they end on a box sticking out under
@@ -123,9 +122,6 @@ SAG_SPREAD = 3.35
 sigma * 3.35 / sqrt(N)..."""
 SAG_FLOOR = 0.35
 """...but a top's fitted sag is never taken as surer than this share of sigma(z)."""
-MAX_FILL = 1.15
-"""A flat top's pixels, laid on its plane, fit in its rectangle; more of them than it has
-room for is a surface folding over itself (a cup's rim with its walls inside and out)."""
 ROUND_TURNED = 0.8
 """A top whose rectangle is more than this share of the one round its pixels turned 45 degrees
 (a disc's is all of it, a square's two thirds, a longer rectangle's less) is round..."""
@@ -555,7 +551,6 @@ def _boxes(tops: Tops, round_: Round, settings: FinderSettings, lump_px: float) 
         & flat
         & ~piece
         & (tops.fill >= fill_needed)
-        & (tops.fill <= MAX_FILL)
         & (tops.corners >= corners_needed)
         & ~round_top
         & ~curved.any(axis=1)
