@@ -21,9 +21,9 @@ and its colour_sigma's noise to the colour, and publishes (keys under ``--namesp
   tf_static                      TFMessage world -> camera_link -> camera_optical_frame, latched
 
 Every message of one capture carries the same stamp: the simulated time of the capture. Runs in
-real time by default, dropping a picture a subscriber is too slow for (newest wins); as fast as
-it can with --fast, where every picture waits for room and none is dropped; and stops after
---frames captures if given.
+real time by default, dropping a picture when the way out to the router stays full (newest
+wins); as fast as it can with --fast, where every picture waits for room and none is dropped;
+and stops after --frames captures if given.
 --write-scene FILE.toml writes the world it would simulate as a scene file and exits.
 Settings (flag > environment variable > config/onebox.toml > default) are listed below.
 """
