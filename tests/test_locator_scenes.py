@@ -50,7 +50,7 @@ def run_scene(processes, inbox: Inbox, test_bus, scene: str, *flags: str):
 
 PALLET = (
     "a partly hidden carton's strip reported with a hidden side: box 1's beside box 11 "
-    "(0.265-0.268 x 0.081-0.084 x 0.298 m) 0.139-0.140 m from box 1's top middle (bound "
+    "(0.265-0.268 x 0.081-0.084 x 0.298 m) 0.141-0.142 m from box 1's top middle (bound "
     "0.1375), and in some pictures box 10's beside box 12 (0.23-0.27 x 0.043-0.045 x 0.100 m) "
     "0.161-0.163 m from box 10's; also boxes 8 and 9 0.099 m tall for 0.300, measured from the "
     "middle row's tops, and in some pictures two middle-row cartons of one shade one box "
