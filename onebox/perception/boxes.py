@@ -27,9 +27,10 @@ The pipeline, one module a physical effect:
    - which tops are boxes (:func:`_boxes`): large enough, level, flat, not curved over their
      middle half or their middle 80 % beyond each fitted sag's noise, filling their rectangle
      and its corners (of what is seen, or covered by a top standing over it
-     (:func:`_under_carried`), and a fifth of the rectangle at least), not round (its
-     outline as wide at every turn: a tin's lid), not cut off, not a narrow piece of a longer
-     top (its surface going on at its height past two sides: a bin's rim);
+     (:func:`_under_carried`), or left blank beside something nearer; and a fifth of the
+     rectangle at least), not round (its outline as wide at every turn: a tin's lid), not
+     cut off, not a narrow piece of a longer top (its surface going on at its height past two
+     sides: a bin's rim);
    - what each top stands on (:func:`_bases`, before the test above): the support or a lower
      top, looked for at its own height just past the top's sides, within where the top's faces
      are seen to end (:func:`_face_bottom`), or where they end on a box sticking out under
@@ -401,6 +402,10 @@ class Round:
     cover: BoolArray
     """(n, COVER_GRID ** 2): which points of a grid on the top's rectangle are hidden: seen
     nearer (a box standing on it, an object in front), or under a top standing on it."""
+    blank: BoolArray
+    """(n, COVER_GRID ** 2): which have no reading, on a top something nearer hides in part: a
+    stereo camera reads nothing on a surface beside a nearer edge (one of its two views does
+    not see it there)."""
 
     @property
     def covered(self) -> Float64Array:
@@ -409,9 +414,15 @@ class Round:
         return result
 
     @property
-    def corners_covered(self) -> Float64Array:
-        """(n,): the share of its four corners hidden."""
-        result: Float64Array = self.cover[:, _COVER_CORNER].mean(axis=1)
+    def unseen(self) -> Float64Array:
+        """(n,): the share of the top's rectangle hidden or blank."""
+        result: Float64Array = (self.cover | self.blank).mean(axis=1)
+        return result
+
+    @property
+    def corners_unseen(self) -> Float64Array:
+        """(n,): the share of its four corners hidden or blank."""
+        result: Float64Array = (self.cover | self.blank)[:, _COVER_CORNER].mean(axis=1)
         return result
 
 
@@ -461,14 +472,14 @@ def _look_round(
     with np.errstate(invalid="ignore"):
         level = (np.abs(seen - z_expected) <= tolerance).mean(axis=2) >= 0.5
     unread = (np.isnan(seen) & inside).mean(axis=2) >= HIDDEN_SHARE
-    cover = _covered(tops, depth_m, lens, support)
+    cover, blank = _covered(tops, depth_m, lens, support)
     rows, cols = tops.labels.shape
     vc, uc = vi - origin[0], ui - origin[1]
     in_crop = inside & (vc >= 0) & (vc < rows) & (uc >= 0) & (uc < cols)
     seen_top = np.where(
         in_crop, tops.labels[np.clip(vc, 0, rows - 1), np.clip(uc, 0, cols - 1)] - 1, -1
     )
-    return Round(hidden, unread, lower, level, seen_top, ab, cover)
+    return Round(hidden, unread, lower, level, seen_top, ab, cover, blank)
 
 
 def _lens_array(lens: Intrinsics) -> Float64Array:
@@ -476,9 +487,12 @@ def _lens_array(lens: Intrinsics) -> Float64Array:
     return np.array([lens.fx, lens.fy, lens.cx, lens.cy])
 
 
-def _covered(tops: Tops, depth_m: Float32Array, lens: Intrinsics, support: Support) -> BoolArray:
+def _covered(
+    tops: Tops, depth_m: Float32Array, lens: Intrinsics, support: Support
+) -> tuple[BoolArray, BoolArray]:
     """Which points of a grid on each top's rectangle something nearer hides (a box standing
-    on it, an object in front), looked at."""
+    on it, an object in front), looked at; and which have no reading on a top something
+    nearer hides in part (:attr:`Round.blank`)."""
     s, t = _COVER_S, _COVER_T
     z_expected, seen = kernels.probe_cover(
         tops.middle_ab,
@@ -496,7 +510,15 @@ def _covered(tops: Tops, depth_m: Float32Array, lens: Intrinsics, support: Suppo
     tolerance = np.maximum(3.0 * tops.sigma_m, 0.006)[:, None]
     with np.errstate(invalid="ignore"):
         nearer: BoolArray = seen < z_expected - 4.0 * tolerance
-    return nearer
+    # ... beside a point seen nearer, on the grid.
+    grid = nearer.reshape(-1, COVER_GRID, COVER_GRID)
+    beside = grid.copy()
+    beside[:, 1:] |= grid[:, :-1]
+    beside[:, :-1] |= grid[:, 1:]
+    beside[:, :, 1:] |= grid[:, :, :-1]
+    beside[:, :, :-1] |= grid[:, :, 1:]
+    blank: BoolArray = np.isnan(seen) & beside.reshape(nearer.shape)
+    return nearer, blank
 
 
 def _under_carried(tops: Tops, round_: Round, on: npt.NDArray[np.intp], held: BoolArray) -> Round:
@@ -526,9 +548,10 @@ def _under_carried(tops: Tops, round_: Round, on: npt.NDArray[np.intp], held: Bo
 
 def _boxes(tops: Tops, round_: Round, settings: FinderSettings, lump_px: float) -> BoolArray:
     """Which tops are boxes' (see the module docstring)."""
-    # What something nearer hides cannot be filled: ask for the rest.
-    fill_needed = np.maximum(settings.min_score * (1.0 - round_.covered), MIN_SEEN)
-    corners_needed = CORNER_FILL * (1.0 - round_.corners_covered)
+    # What something nearer hides, or a stereo camera leaves blank beside it, cannot be
+    # filled: ask for the rest.
+    fill_needed = np.maximum(settings.min_score * (1.0 - round_.unseen), MIN_SEEN)
+    corners_needed = CORNER_FILL * (1.0 - round_.corners_unseen)
     flat = tops.rms_m <= np.maximum(FLAT_SIGMAS * tops.sigma_m, FLAT_M)
     # A top seen whole whose outline is about as wide at every turn is round (a tin's lid),
     # however full its rectangle.
