@@ -403,8 +403,8 @@ class Round:
     """(n, COVER_GRID ** 2): which points of a grid on the top's rectangle are hidden: seen
     nearer (a box standing on it, an object in front), or under a top standing on it."""
     blank: BoolArray
-    """(n, COVER_GRID ** 2): which have no reading, on a top something nearer hides in part: a
-    stereo camera reads nothing on a surface beside a nearer edge (one of its two views does
+    """(n, COVER_GRID ** 2): which have no reading, beside a point of the grid seen nearer: a
+    stereo camera reads nothing on a surface along a nearer edge (one of its two views does
     not see it there)."""
 
     @property
@@ -491,8 +491,8 @@ def _covered(
     tops: Tops, depth_m: Float32Array, lens: Intrinsics, support: Support
 ) -> tuple[BoolArray, BoolArray]:
     """Which points of a grid on each top's rectangle something nearer hides (a box standing
-    on it, an object in front), looked at; and which have no reading on a top something
-    nearer hides in part (:attr:`Round.blank`)."""
+    on it, an object in front), looked at; and which have no reading beside one of those
+    (:attr:`Round.blank`)."""
     s, t = _COVER_S, _COVER_T
     z_expected, seen = kernels.probe_cover(
         tops.middle_ab,
