@@ -109,7 +109,8 @@ XFAIL_TAPED_FLAPS = {
 XFAIL_TAPED_SCRAPS = {
     (20, "none"): "box 7 missed",
     (38, "d435"): f"{TAPE}: box 7 as 0.075 and 0.043 m wide pieces (1 false); {PLATFORM}: box 8 "
-    "(0.174 m), and boxes 2 and 3 beside it 0.026 m for 0.200 from it",
+    "(0.174 m), and boxes 2 and 3 beside it 0.026 m for 0.200 from it, box 6 (partly hidden) "
+    "0.027 m",
     (3, "azure_kinect"): f"{LOWER}: box 6 0.082 m for 0.300, from box 3 beside it (0.218 m)",
 }
 
@@ -132,7 +133,8 @@ XFAIL_D435_LENS = {
     "centre 10 mm off (bound 5)",
     (8, "d435"): f"{SHADE}: box 6 part of a 0.803 x 0.294 m top (fill 0.47, no box), missed",
     (10, "d435"): f"{LOWER}: box 12 0.033 m for 0.235, from its 0.200 m neighbours; box 2 0.032 "
-    "m for 0.200, from box 1 beside it (0.168 m)",
+    "m for 0.200, from box 1 beside it (0.168 m); boxes 5 and 7 (partly hidden) 0.034 and "
+    "0.029 m for 0.200 and 0.196",
 }
 
 
