@@ -159,7 +159,7 @@ def rectangle_angles(
 
 
 @numba.njit(cache=True, nogil=True)
-def _profile_keep(
+def _kept_extent(
     p: Float64Array,
     q: Float64Array,
     lo: int,
@@ -170,12 +170,13 @@ def _profile_keep(
     end_p: float,
     start_q: float,
     end_q: float,
-) -> npt.NDArray[np.bool_]:
+) -> tuple[npt.NDArray[np.bool_], float, float, float, float]:
     """Whether each of one top's pixels (``lo`` to ``hi``) has cross-sections along ``p`` and
     along ``q`` (bins ``step`` wide from the top's least coordinate, ``start_p`` and
     ``start_q``; ``end_p`` and ``end_q`` the greatest, +-inf if none) each holding at least
     ``share`` of the top's typical one along that axis (its pixels over its cross-sections
-    that hold any). The two axes are counted in the same passes, each on its own."""
+    that hold any; all of the pixels if none does), and the kept pixels' least and greatest
+    ``p`` and ``q``. The two axes are counted in the same passes, each on its own."""
     width_p = int(np.floor((end_p - start_p) / step)) + 1 if np.isfinite(end_p) else 0
     width_q = int(np.floor((end_q - start_q) / step)) + 1 if np.isfinite(end_q) else 0
     counts_p = np.zeros(width_p, dtype=np.int64)
@@ -203,25 +204,6 @@ def _profile_keep(
         keep[i] = (counts_p[slot_p[i]] >= share * typical_p) & (
             counts_q[slot_q[i]] >= share * typical_q
         )
-    return keep
-
-
-@numba.njit(cache=True, nogil=True)
-def _kept_extent(
-    p: Float64Array,
-    q: Float64Array,
-    lo: int,
-    hi: int,
-    step: float,
-    share: float,
-    start_p: float,
-    end_p: float,
-    start_q: float,
-    end_q: float,
-) -> tuple[npt.NDArray[np.bool_], float, float, float, float]:
-    """:func:`_profile_keep` (all of the pixels if it keeps none), and the kept pixels' least
-    and greatest ``p`` and ``q``."""
-    keep = _profile_keep(p, q, lo, hi, step, share, start_p, end_p, start_q, end_q)
     if not keep.any():
         keep[:] = True
     low_p, high_p, low_q, high_q = np.inf, -np.inf, np.inf, -np.inf
