@@ -721,7 +721,8 @@ def _bases(
     rectangle holds its middle (a lower top seen only in a gap). Each is looked for at its own
     height just past the top's sides: a box stands on the level found there on the most probes
     (a box on a wider box finds it all round; a box beside a lower one finds it on one side
-    only, and its own base level on the others). Ties go to the higher level. A level above
+    only, and its own base level on the others). Ties go to the higher level; of tops at
+    one level within the noise, the one whose rectangle holds its middle. A level above
     where the top's faces are seen to end is none it stands on: its sides go on down past it
     (a box beside lower ones, seen from the side they do not hide), and a level found where
     the faces end, past two sides or more, wins (a box on one a little wider, whose top shows
@@ -765,8 +766,18 @@ def _bases(
     score += 1000.0 * at_face
     score += 1e-3 * np.nan_to_num(levels, nan=0.0)  # ties: the higher
     best = np.argmax(score, axis=1)
-    base = np.nan_to_num(levels[np.arange(n), best], nan=0.0)
-    on = np.where(best < width, ranked[np.arange(n), np.minimum(best, width - 1)], -1)
+    rows = np.arange(n)
+    base = np.nan_to_num(levels[rows, best], nan=0.0)
+    # Tops at one level within the noise are found on the same probes: of those, it stands on
+    # one that reaches under it (not a neighbour of that height beside it).
+    under_alike = (
+        (np.abs(levels[:, :width] - levels[rows, best, None]) < tolerance[:, 0, 0])
+        & (score[:, :width] >= 1000.0 * at_face[rows, best, None])
+        & np.take_along_axis(holds, ranked, axis=1)
+        & (best < width)[:, None]
+    )
+    best = np.where(under_alike.any(axis=1), np.argmax(under_alike, axis=1), best)
+    on = np.where(best < width, ranked[rows, np.minimum(best, width - 1)], -1)
     # A face seen to end: the box stands there (on a box whose top it hides, or that is too
     # small to be a top), unless a level was found there.
     unmatched = ledge & (np.abs(base - face_bottom_m) > step)
