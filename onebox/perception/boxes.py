@@ -26,9 +26,9 @@ The pipeline, one module a physical effect:
      much of its rectangle is not seen;
    - which tops are boxes (:func:`_boxes`): large enough, level, flat, not curved over their
      middle half or their middle 80 % beyond each fitted sag's noise, filling their rectangle
-     and its corners (of what is seen, or covered by a top standing over it
-     (:func:`_under_carried`), or left blank beside something nearer; and a fifth of the
-     rectangle at least), not round (its outline as wide at every turn: a tin's lid), not
+     and its corners (of what is not hidden, nor covered by a top standing over it
+     (:func:`_under_carried`), nor missing along what hides it: no reading, or its own
+     pixels lost in the edge's smear; and a fifth of the rectangle at least), not round (its outline as wide at every turn: a tin's lid), not
      cut off, not a narrow piece of a longer top (its surface going on at its height past two
      sides: a bin's rim);
    - what each top stands on (:func:`_bases`, before the test above): the support or a lower
@@ -402,15 +402,38 @@ class Round:
     cover: BoolArray
     """(n, COVER_GRID ** 2): which points of a grid on the top's rectangle are hidden: seen
     nearer (a box standing on it, an object in front), or under a top standing on it."""
-    blank: BoolArray
-    """(n, COVER_GRID ** 2): which have no reading, beside a point of the grid seen nearer: a
-    stereo camera reads nothing on a surface along a nearer edge (one of its two views does
-    not see it there)."""
+    missing: BoolArray
+    """(n, COVER_GRID ** 2): which show nothing of the top: no reading, or a reading at its
+    level that no top holds."""
 
     @property
     def covered(self) -> Float64Array:
         """(n,): the share of the top's rectangle hidden."""
         result: Float64Array = self.cover.mean(axis=1)
+        return result
+
+    @property
+    def blank(self) -> BoolArray:
+        """(n, COVER_GRID ** 2): the points missing along a hidden one (beside it, or beside
+        one of these). A stereo camera reads nothing on a surface along a nearer edge (one of
+        its two views does not see it there), and the top's own pixels along it are lost in
+        the edge's smear (its depth steps, its normals turn), a band wider than the grid's
+        step when far."""
+        grid = self.cover.reshape(-1, COVER_GRID, COVER_GRID)
+        missing = self.missing.reshape(grid.shape)
+        # From the hidden points across the missing ones next to them, until none is added.
+        reached = grid.copy()
+        while True:
+            grown = reached.copy()
+            grown[:, 1:] |= reached[:, :-1]
+            grown[:, :-1] |= reached[:, 1:]
+            grown[:, :, 1:] |= reached[:, :, :-1]
+            grown[:, :, :-1] |= reached[:, :, 1:]
+            grown &= missing | grid
+            if (grown == reached).all():
+                break
+            reached = grown
+        result: BoolArray = (reached & missing).reshape(self.cover.shape)
         return result
 
     @property
@@ -472,14 +495,22 @@ def _look_round(
     with np.errstate(invalid="ignore"):
         level = (np.abs(seen - z_expected) <= tolerance).mean(axis=2) >= 0.5
     unread = (np.isnan(seen) & inside).mean(axis=2) >= HIDDEN_SHARE
-    cover, blank = _covered(tops, depth_m, lens, support)
+    seen_top = np.where(inside, _top_at(tops, origin, vi, ui), -1)
+    cover, missing = _covered(tops, origin, depth_m, lens, support)
+    return Round(hidden, unread, lower, level, seen_top, ab, cover, missing)
+
+
+def _top_at(
+    tops: Tops, origin: tuple[int, int], v: npt.NDArray[np.intp], u: npt.NDArray[np.intp]
+) -> npt.NDArray[np.intp]:
+    """The top at each pixel (row ``v``, column ``u`` of the picture; -1: none, or outside the
+    part of the picture the tops were found in, which starts at ``origin``)."""
     rows, cols = tops.labels.shape
-    vc, uc = vi - origin[0], ui - origin[1]
-    in_crop = inside & (vc >= 0) & (vc < rows) & (uc >= 0) & (uc < cols)
-    seen_top = np.where(
-        in_crop, tops.labels[np.clip(vc, 0, rows - 1), np.clip(uc, 0, cols - 1)] - 1, -1
-    )
-    return Round(hidden, unread, lower, level, seen_top, ab, cover, blank)
+    vc, uc = v - origin[0], u - origin[1]
+    in_crop = (vc >= 0) & (vc < rows) & (uc >= 0) & (uc < cols)
+    labels = tops.labels[np.clip(vc, 0, rows - 1), np.clip(uc, 0, cols - 1)]
+    result: npt.NDArray[np.intp] = np.where(in_crop, labels - 1, -1)
+    return result
 
 
 def _lens_array(lens: Intrinsics) -> Float64Array:
@@ -488,13 +519,12 @@ def _lens_array(lens: Intrinsics) -> Float64Array:
 
 
 def _covered(
-    tops: Tops, depth_m: Float32Array, lens: Intrinsics, support: Support
+    tops: Tops, origin: tuple[int, int], depth_m: Float32Array, lens: Intrinsics, support: Support
 ) -> tuple[BoolArray, BoolArray]:
     """Which points of a grid on each top's rectangle something nearer hides (a box standing
-    on it, an object in front), looked at; and which have no reading beside one of those
-    (:attr:`Round.blank`)."""
+    on it, an object in front), looked at; and which are missing (:attr:`Round.missing`)."""
     s, t = _COVER_S, _COVER_T
-    z_expected, seen = kernels.probe_cover(
+    z_expected, seen, vi, ui = kernels.probe_cover(
         tops.middle_ab,
         tops.axis_ab,
         tops.length_m,
@@ -510,15 +540,8 @@ def _covered(
     tolerance = np.maximum(3.0 * tops.sigma_m, 0.006)[:, None]
     with np.errstate(invalid="ignore"):
         nearer: BoolArray = seen < z_expected - 4.0 * tolerance
-    # ... beside a point seen nearer, on the grid.
-    grid = nearer.reshape(-1, COVER_GRID, COVER_GRID)
-    beside = grid.copy()
-    beside[:, 1:] |= grid[:, :-1]
-    beside[:, :-1] |= grid[:, 1:]
-    beside[:, :, 1:] |= grid[:, :, :-1]
-    beside[:, :, :-1] |= grid[:, :, 1:]
-    blank: BoolArray = np.isnan(seen) & beside.reshape(nearer.shape)
-    return nearer, blank
+        level = np.abs(seen - z_expected) <= tolerance
+    return nearer, np.isnan(seen) | (level & (_top_at(tops, origin, vi, ui) < 0))
 
 
 def _under_carried(tops: Tops, round_: Round, on: npt.NDArray[np.intp], held: BoolArray) -> Round:

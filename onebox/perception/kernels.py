@@ -1158,20 +1158,25 @@ def probe_cover(
     offset: float,
     depth: Float32Array,
     lens: Float64Array,
-) -> tuple[Float64Array, Float64Array]:
+) -> tuple[Float64Array, Float64Array, npt.NDArray[np.intp], npt.NDArray[np.intp]]:
     """Points on each top's rectangle (:func:`onebox.perception.boxes._covered`): ``s`` of
     its length along its axis and ``t`` of its width across, at its height, seen as
-    :func:`sight` sees them: z expected and depth seen, (n, len(s)) each."""
+    :func:`sight` sees them: z expected, depth seen and the pixel's row and column (0 outside
+    the picture), (n, len(s)) each."""
     n, count = len(length), len(s)
     z = np.empty((n, count))
     seen = np.empty((n, count))
+    vi = np.zeros((n, count), dtype=np.intp)
+    ui = np.zeros((n, count), dtype=np.intp)
     for k in range(n):
         ax, ay = axis_ab[k, 0], axis_ab[k, 1]
         for i in range(count):
             a = (middle_ab[k, 0] + (s[i] * length[k]) * ax) + (t[i] * width[k]) * -ay
             b = (middle_ab[k, 1] + (s[i] * length[k]) * ay) + (t[i] * width[k]) * ax
-            z[k, i], seen[k, i], _, _, _ = _sight_one(a, b, height[k], basis, offset, depth, lens)
-    return z, seen
+            z[k, i], seen[k, i], _, vi[k, i], ui[k, i] = _sight_one(
+                a, b, height[k], basis, offset, depth, lens
+            )
+    return z, seen, vi, ui
 
 
 @numba.njit(cache=True, nogil=True)
