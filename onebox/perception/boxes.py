@@ -28,9 +28,9 @@ The pipeline, one module a physical effect:
      middle half or their middle 80 % beyond each fitted sag's noise, filling their rectangle
      and its corners (of what is not hidden, nor covered by a top standing over it
      (:func:`_under_carried`), nor missing along what hides it: no reading, or its own
-     pixels lost in the edge's smear; and a fifth of the rectangle at least), not round (its outline as wide at every turn: a tin's lid), not
-     cut off, not a narrow piece of a longer top (its surface going on at its height past two
-     sides: a bin's rim);
+     pixels lost in the edge's smear; and a fifth of the rectangle at least), not round (its
+     outline as wide at every turn: a tin's lid), not cut off, not a narrow piece of a longer
+     top (its surface going on at its height past two sides: a bin's rim);
    - what each top stands on (:func:`_bases`, before the test above): the support or a lower
      top, looked for at its own height just past the top's sides, within where the top's faces
      are seen to end (:func:`_face_bottom`), or where they end on a box sticking out under
