@@ -70,8 +70,9 @@ MIN_PART_M = 0.04
 RISE_M = 0.02
 """A cut whose line runs beside something standing this much higher than the top (4 sigma(z)
 at least; the lowest box), within ``BESIDE_PX`` pixels (a box's face seen rising from its
-foot is a pixel or two above the top there)..."""
-BESIDE_PX = 3
+foot stays under this rise for a pixel or two, for three or four where the camera looks
+at that face more squarely)..."""
+BESIDE_PX = 4
 EDGE_BESIDE = 0.75
 """...over this share of its length or more follows that thing's edge: no seam (a carton
 standing across a seam, as in a cross-stacked layer, hides less of it)."""
