@@ -67,8 +67,8 @@ two sides too) and no wider than this, with alike flaps either side, is tape or 
 band (packing tape is 48 or 75 mm wide), not two seams..."""
 MIN_PART_M = 0.05
 """A seam leaves at least this much of the top either side: the narrowest carton, and wider
-than packing tape (48 mm), whose one edge, the flap past its other lost in a stereo camera's
-dropout along the top's far side, cuts no strip of tape off as a box."""
+than packing tape (48 mm). Where a stereo camera's dropout along a top's far side takes the
+flap past the tape's far edge, the tape's near edge alone then cuts no strip of it off."""
 RISE_M = 0.02
 """A cut whose line runs beside something standing this much higher than the top (4 sigma(z)
 at least; the lowest box), within ``BESIDE_PX`` pixels (a box's face seen rising from its
