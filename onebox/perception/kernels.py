@@ -423,7 +423,11 @@ def measure_tops(
                 curved = sums[w, direction, 3] - count * mean_square * mean_residual
                 spread = sums[w, direction, 4] - count * mean_square * mean_square
                 curve = (curved / count) / max(spread / count, 1e-18)
+                # Under two pixels either side, the fit has two or three offsets to go by and
+                # its curve is noise (a 25 mm sag across a flat top six pixels wide): no curve.
                 this = abs(curve) * max(window[w, direction], 0.0) ** 2
+                if window[w, direction] < 2.0 * step:
+                    this = 0.0
                 share = this / max(extent / 2, 1e-9)
                 if share > sag_share[k, w]:
                     sag[k, w] = this
