@@ -44,6 +44,7 @@ The pipeline, one module a physical effect:
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, replace
 
@@ -412,7 +413,7 @@ class Round:
         result: Float64Array = self.cover.mean(axis=1)
         return result
 
-    @property
+    @functools.cached_property
     def blank(self) -> BoolArray:
         """(n, COVER_GRID ** 2): the points missing along a hidden one (beside it, or beside
         one of these). A stereo camera reads nothing on a surface along a nearer edge (one of
@@ -806,7 +807,7 @@ def _bases(
     unmatched = ledge & (np.abs(base - face_bottom_m) > step)
     base = np.where(unmatched, face_bottom_m, base)
     on = np.where(unmatched, -1, on)
-    held = (on < 0) | holds[np.arange(n), np.maximum(on, 0)]
+    held = (on < 0) | holds[rows, np.maximum(on, 0)]
     return base, on, held
 
 
