@@ -387,7 +387,11 @@ def measure_tops(
             dq = 0.5 * extent_q - step - abs(q[i] - mid_q)
             if dp >= 0 and dp < corner and dq >= 0 and dq < corner:
                 in_corners += footprint[i]
-        corners[k] = min(in_corners / (4.0 * (corner * corner)), 1.0)
+        # A top under two corners wide has its corner squares overlap across it: each holds
+        # what lies between the sides, a pixel in. (Along it they are asked whole: a top small
+        # both ways is a disc as well as a square.)
+        across = max(min(corner, 0.5 * min(extent_p, extent_q) - step), step)
+        corners[k] = min(in_corners / (4.0 * corner * across), 1.0)
         # Lengths on the top's own plane (it may lean): stretch by the slope along each axis.
         stretched_p = extent_p * math.hypot(1.0, alpha * cos + beta * sin)
         stretched_q = extent_q * math.hypot(1.0, beta * cos - alpha * sin)
@@ -917,6 +921,52 @@ def faces_up(
         for c in range(cols):
             up[r, c] &= np.isfinite(depth[r, c])
     return up
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def faces_up_sided(
+    depth: Float32Array,
+    lens: Float32Array,
+    plane: Float32Array,
+    limits: Float32Array,
+) -> npt.NDArray[np.bool_]:
+    """Whether each pixel faces up by the gradient across one pixel, on the side where its
+    surface goes on: of the differences to the neighbour before and after (each way), the
+    smaller, so an edge beside the pixel does not turn it. False where no reading or no
+    neighbour read either way; arguments as for :func:`faces_up`."""
+    rows, cols = depth.shape
+    fx, fy, cx, cy = lens[0], lens[1], lens[2], lens[3]
+    n0, n1, n2 = plane[0], plane[1], plane[2]
+    cos_max = limits[1]
+    up = np.zeros((rows, cols), dtype=np.bool_)
+    for r in range(1, rows - 1):
+        v = np.float32(r) - cy
+        for c in range(1, cols - 1):
+            z = depth[r, c]
+            if not np.isfinite(z):
+                continue
+            dz_u = _nearer_difference(z - depth[r, c - 1], depth[r, c + 1] - z)
+            dz_v = _nearer_difference(z - depth[r - 1, c], depth[r + 1, c] - z)
+            if not (np.isfinite(dz_u) and np.isfinite(dz_v)):
+                continue
+            u = np.float32(c) - cx
+            nx = -fx * dz_u
+            ny = -fy * dz_v
+            nz = z + u * dz_u + v * dz_v
+            along = -(nx * n0 + ny * n1 + nz * n2)
+            norm = np.sqrt(nx * nx + ny * ny + nz * nz)
+            up[r, c] = along > cos_max * norm
+    return up
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _nearer_difference(before: np.float32, after: np.float32) -> np.float32:
+    """Of two differences, the smaller (the one that is a number, NaN if neither)."""
+    if not np.isfinite(before):
+        return after
+    if not np.isfinite(after):
+        return before
+    return before if abs(before) <= abs(after) else after
 
 
 @numba.njit(cache=True, nogil=True)
@@ -1676,6 +1726,7 @@ def warm_up() -> None:
     lens, plane, limits = (np.ones(k, dtype=np.float32) for k in (4, 6, 6))
     surface_heights(picture, picture, plane, limits)
     faces_up(picture, picture, picture, 1, lens, plane, limits)
+    faces_up_sided(picture, lens, plane, limits)
     surface_steps(picture, picture, picture, picture, limits)
     read_or(picture, picture, 0.0)
     merge_flags(picture > 0, picture > 0, picture > 0)

@@ -18,9 +18,10 @@ The physical effects, one line each:
   depth's gradient alone: for ``P = z * ray``, ``n ~ (-fx z_u, -fy z_v, z + (u - cx) z_u +
   (v - cy) z_v)``. The gradient is taken across a few pixels of box-filtered depth (wider where
   the noise is larger), so a top's noise does not turn it into a side; where the noise is
-  small against a pixel's footprint, also across one pixel either side, so a top a few pixels
-  wide keeps its facing. A top faces up within ``MAX_TOP_TILT_DEG``; a side face, a can's flank
-  or a smeared edge does not.
+  small against a pixel's footprint, also across one pixel: either side, and on the side where
+  the surface goes on (the smaller step to a neighbour, each way), so a top a few pixels wide,
+  an edge within every window on it, keeps its facing. A top faces up within
+  ``MAX_TOP_TILT_DEG``; a side face, a can's flank or a smeared edge does not.
 - **Depth steps.** Where the height spread of a pixel's 3 x 3 neighbourhood passes
   ``STEP_SIGMAS`` sigma(z) (and ``MIN_STEP_M``), two surfaces meet: the pixel is a boundary.
   With independent errors, only where the heights through a 3 x 3 median step too (a pixel
@@ -157,10 +158,11 @@ def read_surface(depth_m: Float32Array, lens: Intrinsics, support: Support) -> S
 
     up = facing(reach)
     # A top a few pixels wide has no pixel whose wide window misses its edges: where the noise
-    # is small against a pixel's footprint, the gradient across one pixel either side is
-    # steady enough to say which way it faces.
+    # is small against a pixel's footprint, the gradient across one pixel is steady enough to
+    # say which way it faces, taken either side or on the side away from an edge beside it.
     if quiet.any():
-        kernels.merge_flags(up, facing(1), quiet)
+        sided = kernels.faces_up_sided(depth, lens_f, plane, limits)
+        kernels.merge_flags(up, facing(1) | sided, quiet)
     # The 3 x 3 spread of heights; no reading counts as neither high nor low.
     square = np.ones((3, 3), np.uint8)
     high = np.asarray(cv2.dilate(for_high, square), dtype=np.float32)

@@ -119,7 +119,8 @@ class Tops:
     fill: Float64Array
     """Area seen over the rectangle's."""
     corners: Float64Array
-    """How full the rectangle's four corner squares are (a fifth of the width on a side)."""
+    """How full the rectangle's four corner squares are (a fifth of the width on a side, three
+    pixels at least, a pixel in; on a top under two squares wide, as far across as they reach)."""
     turned: Float64Array
     """The rectangle's area over that of the rectangle round the same pixels turned 45
     degrees, strays left out of both: about 1 for a round top, as wide at every turn; two
