@@ -28,9 +28,11 @@ The pipeline, one module a physical effect:
      middle half or their middle 80 % beyond each fitted sag's noise, filling their rectangle
      and its corners (of what is not hidden, nor covered by a top standing over it
      (:func:`_under_carried`), nor missing along what hides it: no reading, or its own
-     pixels lost in the edge's smear; and a fifth of the rectangle at least), not round (its
-     outline as wide at every turn: a tin's lid), not cut off, not a narrow piece of a longer
-     top (its surface going on at its height past two sides: a bin's rim);
+     pixels lost in the edge's smear; and a fifth of the rectangle at least; where the depth is
+     quiet, nor the band past its pixel-exact outline that its rectangle takes in along a
+     slanted side), not round (its outline as wide at every turn: a tin's lid), not cut off,
+     not a narrow piece of a longer top (its surface going on at its height past two sides: a
+     bin's rim);
    - what each top stands on (:func:`_bases`, before the test above): the support or a lower
      top, looked for at its own height just past the top's sides, within where the top's faces
      are seen to end (:func:`_face_bottom`), or where they end on a box sticking out under
@@ -124,6 +126,9 @@ SAG_SPREAD = 3.35
 sigma * 3.35 / sqrt(N)..."""
 SAG_FLOOR = 0.35
 """...but a top's fitted sag is never taken as surer than this share of sigma(z)."""
+OUTLINE_PX = 0.25
+"""A rectangle placed half a pixel past the middles of a top's outermost pixels lies, along a
+side slanted across the pixels, up to half a pixel past the true side: this much on average."""
 ROUND_TURNED = 0.8
 """A top whose rectangle is more than this share of the one round its pixels turned 45 degrees
 (a disc's is all of it, a square's two thirds, a longer rectangle's less) is round..."""
@@ -302,7 +307,8 @@ def find_boxes(
     face_bottom, ledge = _face_bottom(tops, looked, origin, depth, lens, support)
     base, on, held = _bases(tops, round_, face_bottom, ledge, depth, lens, support)
     round_ = _under_carried(tops, round_, on, held)
-    is_box = _boxes(tops, round_, settings, lump_px)
+    quiet = np.bincount(tops.points.top, surface.quiet.ravel()[tops.points.index], len(tops))
+    is_box = _boxes(tops, round_, settings, lump_px, quiet > 0.5 * tops.pixels)
     # A top that several boxes stand on, and that they mostly hide or that they stand on
     # outside its rectangle (past a side of it something hides), is a platform (a pallet's
     # top, its rim seen in front of the load): a level to stand on, not a box to report. A
@@ -570,16 +576,24 @@ def _under_carried(tops: Tops, round_: Round, on: npt.NDArray[np.intp], held: Bo
     return replace(round_, cover=cover)
 
 
-def _boxes(tops: Tops, round_: Round, settings: FinderSettings, lump_px: float) -> BoolArray:
-    """Which tops are boxes' (see the module docstring)."""
+def _boxes(
+    tops: Tops, round_: Round, settings: FinderSettings, lump_px: float, quiet: BoolArray
+) -> BoolArray:
+    """Which tops are boxes' (see the module docstring); ``quiet``: most of the top's pixels
+    have noise under a share of their footprint (:attr:`Surface.quiet`)."""
+    # Where the depth is quiet, a top's outline is pixel-exact, and its rectangle lies past
+    # its sides by the band OUTLINE_PX wide that a slanted side leaves: neither its fill nor
+    # its roundness is asked of that band (a share of a top a few pixels across).
+    band = 2.0 * OUTLINE_PX * tops.pixel_m * (1.0 / tops.width_m + 1.0 / tops.length_m)
+    band = np.where(quiet, band, 0.0)
     # What something nearer hides, or a stereo camera leaves blank beside it, cannot be
     # filled: ask for the rest.
-    fill_needed = np.maximum(settings.min_score * (1.0 - round_.unseen), MIN_SEEN)
+    fill_needed = np.maximum(settings.min_score * (1.0 - round_.unseen) * (1.0 - band), MIN_SEEN)
     corners_needed = CORNER_FILL * (1.0 - round_.corners_unseen)
     flat = tops.rms_m <= np.maximum(FLAT_SIGMAS * tops.sigma_m, FLAT_M)
     # A top seen whole whose outline is about as wide at every turn is round (a tin's lid),
     # however full its rectangle.
-    round_top = (tops.turned > ROUND_TURNED) & (round_.covered < ROUND_SEEN_COVERED)
+    round_top = (tops.turned > ROUND_TURNED * (1.0 - band)) & (round_.covered < ROUND_SEEN_COVERED)
     # A narrow top whose surface goes on at its height past two of its sides is a piece of a
     # longer one that fell apart where its normals came and went (a bin's rim).
     pixel = tops.pixel_m
