@@ -126,6 +126,11 @@ SAG_SPREAD = 3.35
 sigma * 3.35 / sqrt(N)..."""
 SAG_FLOOR = 0.35
 """...but a top's fitted sag is never taken as surer than this share of sigma(z)."""
+MAX_FILL = 1.5
+"""A flat top's pixels, laid on its plane, fit in its rectangle (a small one seen at a slant
+overfills it by up to a sixth: each pixel's footprint is taken at its middle); half as much
+again is a surface seen edge-on, its pixels' footprints blowing up as its plane turns along
+the rays (a strip of a drill's flank, 9 times its rectangle)."""
 OUTLINE_PX = 0.25
 """A rectangle placed half a pixel past the middles of a top's outermost pixels lies, along a
 side slanted across the pixels, up to half a pixel past the true side: this much on average."""
@@ -148,6 +153,9 @@ go..."""
 PIECE_LEVEL_SIDES = 2
 """...so one whose surface goes on at its height past this many of its sides or more (a bin's
 rim, the corner where two rims meet) is a piece of a longer top, not a box's."""
+LONG_NARROW = 2.0
+"""A narrow top at least this many times as long as wide is judged level by its slope along
+it alone."""
 MIN_WIDTH_M = 0.015
 """A top narrower than this is an edge or a rim, not a box."""
 FLAT_SIGMAS = 3.0
@@ -599,6 +607,12 @@ def _boxes(
     pixel = tops.pixel_m
     narrow = tops.width_m < NARROW_PX * pixel
     piece = narrow & (round_.level.sum(axis=1) >= PIECE_LEVEL_SIDES)
+    # Across a narrow top, its edges' smear (a depth edge's pixels read between the two
+    # surfaces) is most of it, and leans its plane: on a long one, its slope along it says
+    # whether it is level. (A short one has no such slope to go by: a ball's cap.)
+    along = np.abs((tops.slope_ab * tops.axis_ab).sum(axis=1))
+    long_narrow = narrow & (tops.length_m >= LONG_NARROW * tops.width_m)
+    tilt = np.where(long_narrow, np.degrees(np.arctan(along)), tops.tilt_deg)
     # Each sag is fitted to its window's pixels: its noise falls with the root of how many
     # independent lumps of noise the window holds, down to a share of sigma(z) (depth errors
     # keep some structure across a top that no count of pixels averages out).
@@ -608,10 +622,11 @@ def _boxes(
     result: BoolArray = (
         (tops.area_m2 >= settings.min_top_area_m2)
         & (tops.width_m >= MIN_WIDTH_M)
-        & (tops.tilt_deg <= settings.max_top_tilt_deg)
+        & (tilt <= settings.max_top_tilt_deg)
         & flat
         & ~piece
         & (tops.fill >= fill_needed)
+        & (tops.fill <= MAX_FILL)
         & (tops.corners >= corners_needed)
         & ~round_top
         & ~curved.any(axis=1)
