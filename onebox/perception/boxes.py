@@ -24,7 +24,8 @@ The pipeline, one module a physical effect:
    - what lies round each top (:func:`_look_round`): something nearer hiding a side (the
      extent along that side is then a lower bound), a lower level, the picture's edge, and how
      much of its rectangle is not seen;
-   - which tops are boxes (:func:`_boxes`): large enough, level, flat, not curved over their
+   - which tops are boxes (:func:`_boxes`): large enough, level (a long narrow one along its
+     length: its edges' smear leans it across), flat, not curved over their
      middle half or their middle 80 % beyond each fitted sag's noise, filling their rectangle
      and its corners (of what is not hidden, nor covered by a top standing over it
      (:func:`_under_carried`), nor missing along what hides it: no reading, or its own
