@@ -64,7 +64,7 @@ from onebox.perception.support import (
     lump_width,
     noise_against,
 )
-from onebox.perception.surface import height_slope, read_surface
+from onebox.perception.surface import QUIET_SHARE, height_slope, read_surface
 from onebox.perception.tops import Tops, cross, find_tops, sight
 
 Float32Array = npt.NDArray[np.float32]
@@ -316,8 +316,8 @@ def find_boxes(
     face_bottom, ledge = _face_bottom(tops, looked, origin, depth, lens, support)
     base, on, held = _bases(tops, round_, face_bottom, ledge, depth, lens, support)
     round_ = _under_carried(tops, round_, on, held)
-    quiet = np.bincount(tops.points.top, surface.quiet.ravel()[tops.points.index], len(tops))
-    is_box = _boxes(tops, round_, settings, lump_px, quiet > 0.5 * tops.pixels)
+    quiet = support.sigma_at(tops.depth_m) < QUIET_SHARE * tops.depth_m / lens.fx
+    is_box = _boxes(tops, round_, settings, lump_px, quiet)
     # A top that several boxes stand on, and that they mostly hide or that they stand on
     # outside its rectangle (past a side of it something hides), is a platform (a pallet's
     # top, its rim seen in front of the load): a level to stand on, not a box to report. A
@@ -588,8 +588,8 @@ def _under_carried(tops: Tops, round_: Round, on: npt.NDArray[np.intp], held: Bo
 def _boxes(
     tops: Tops, round_: Round, settings: FinderSettings, lump_px: float, quiet: BoolArray
 ) -> BoolArray:
-    """Which tops are boxes' (see the module docstring); ``quiet``: most of the top's pixels
-    have noise under a share of their footprint (:attr:`Surface.quiet`)."""
+    """Which tops are boxes' (see the module docstring); ``quiet``: the noise at the top's
+    depth is under a share of a pixel's footprint there (as :attr:`Surface.quiet`)."""
     # Where the depth is quiet, a top's outline is pixel-exact, and its rectangle lies past
     # its sides by the band OUTLINE_PX wide that a slanted side leaves: neither its fill nor
     # its roundness is asked of that band (a share of a top a few pixels across).
