@@ -595,7 +595,8 @@ def _boxes(
     # Where the depth is quiet, a top's outline is pixel-exact, and its rectangle lies past
     # its sides by the band OUTLINE_PX wide that a slanted side leaves: neither its fill nor
     # its roundness is asked of that band (a share of a top a few pixels across).
-    band = 2.0 * OUTLINE_PX * tops.pixel_m * (1.0 / tops.width_m + 1.0 / tops.length_m)
+    pixel = tops.pixel_m
+    band = 2.0 * OUTLINE_PX * pixel * (1.0 / tops.width_m + 1.0 / tops.length_m)
     band = np.where(quiet, band, 0.0)
     # What something nearer hides, or a stereo camera leaves blank beside it, cannot be
     # filled: ask for the rest.
@@ -607,7 +608,6 @@ def _boxes(
     round_top = (tops.turned > ROUND_TURNED * (1.0 - band)) & (round_.covered < ROUND_SEEN_COVERED)
     # A narrow top whose surface goes on at its height past two of its sides is a piece of a
     # longer one that fell apart where its normals came and went (a bin's rim).
-    pixel = tops.pixel_m
     narrow = tops.width_m < NARROW_PX * pixel
     piece = narrow & (round_.level.sum(axis=1) >= PIECE_LEVEL_SIDES)
     # Across a narrow top, its edges' smear (a depth edge's pixels read between the two

@@ -875,6 +875,29 @@ def surface_heights(
     return height, sigma, for_high, for_low, quiet, counted, filled
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _faces_up_by(
+    z: np.float32,
+    dz_u: np.float32,
+    dz_v: np.float32,
+    u: np.float32,
+    v: np.float32,
+    fx: np.float32,
+    fy: np.float32,
+    normal: tuple[np.float32, np.float32, np.float32],
+    cos_max: np.float32,
+) -> bool:
+    """Whether the surface at depth ``z`` (``u``, ``v`` from the principal point), with the
+    depth's gradient ``dz_u``, ``dz_v`` a pixel, faces within the steepest top of the support's
+    ``normal``: ``n ~ (-fx z_u, -fy z_v, z + u z_u + v z_v)``."""
+    nx = -fx * dz_u
+    ny = -fy * dz_v
+    nz = z + u * dz_u + v * dz_v
+    along = -(nx * normal[0] + ny * normal[1] + nz * normal[2])
+    norm = np.sqrt(nx * nx + ny * ny + nz * nz)
+    return along > cos_max * norm  # type: ignore[no-any-return]
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def faces_up(
     depth: Float32Array,
@@ -892,8 +915,7 @@ def faces_up(
     ``plane`` and ``limits`` as for :func:`surface_heights`."""
     rows, cols = depth.shape
     fx, fy, cx, cy = lens[0], lens[1], lens[2], lens[3]
-    n0, n1, n2 = plane[0], plane[1], plane[2]
-    cos_max = limits[1]
+    normal, cos_max = (plane[0], plane[1], plane[2]), limits[1]
     window = 2 * reach + 1
     min_weight = np.float32(0.5 * window * window)
     smooth = np.empty((rows, cols), dtype=np.float32)
@@ -911,12 +933,7 @@ def faces_up(
             dz_u = (smooth[r, c + reach] - smooth[r, c - reach]) / span
             dz_v = (smooth[r + reach, c] - smooth[r - reach, c]) / span
             u = np.float32(c) - cx
-            nx = -fx * dz_u
-            ny = -fy * dz_v
-            nz = smooth[r, c] + u * dz_u + v * dz_v
-            along = -(nx * n0 + ny * n1 + nz * n2)
-            norm = np.sqrt(nx * nx + ny * ny + nz * nz)
-            up[r, c] = along > cos_max * norm
+            up[r, c] = _faces_up_by(smooth[r, c], dz_u, dz_v, u, v, fx, fy, normal, cos_max)
     for r in range(rows):
         for c in range(cols):
             up[r, c] &= np.isfinite(depth[r, c])
@@ -936,8 +953,7 @@ def faces_up_sided(
     neighbour read either way; arguments as for :func:`faces_up`."""
     rows, cols = depth.shape
     fx, fy, cx, cy = lens[0], lens[1], lens[2], lens[3]
-    n0, n1, n2 = plane[0], plane[1], plane[2]
-    cos_max = limits[1]
+    normal, cos_max = (plane[0], plane[1], plane[2]), limits[1]
     up = np.zeros((rows, cols), dtype=np.bool_)
     for r in range(1, rows - 1):
         v = np.float32(r) - cy
@@ -950,12 +966,7 @@ def faces_up_sided(
             if not (np.isfinite(dz_u) and np.isfinite(dz_v)):
                 continue
             u = np.float32(c) - cx
-            nx = -fx * dz_u
-            ny = -fy * dz_v
-            nz = z + u * dz_u + v * dz_v
-            along = -(nx * n0 + ny * n1 + nz * n2)
-            norm = np.sqrt(nx * nx + ny * ny + nz * nz)
-            up[r, c] = along > cos_max * norm
+            up[r, c] = _faces_up_by(z, dz_u, dz_v, u, v, fx, fy, normal, cos_max)
     return up
 
 
