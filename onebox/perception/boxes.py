@@ -54,6 +54,7 @@ from dataclasses import dataclass, field, replace
 import cv2
 import numpy as np
 import numpy.typing as npt
+from scipy.sparse.csgraph import connected_components
 
 from onebox.geometry import Intrinsics
 from onebox.perception import kernels, register
@@ -840,6 +841,22 @@ def _bases(
     base = np.where(unmatched, face_bottom_m, base)
     on = np.where(unmatched, -1, on)
     held = (on < 0) | holds[rows, np.maximum(on, 0)]
+    # Cartons packed side by side at one height stand on one level: a top that finds only a
+    # lower neighbour beside it takes the level a top of its layer (its height, touching,
+    # along the layer) stands on, seen under it (the support, or a top reaching under it):
+    # the highest such, where a flush face runs on down past a pallet's edge.
+    touching = counts[:, 1:] > 0
+    alike = (np.abs(tops.height_m[:, None] - tops.height_m[None, :]) < tolerance[:, 0, 0]) & (
+        touching | touching.T
+    )
+    _, layer = connected_components(alike, directed=False)
+    giving = np.flatnonzero(held)[np.argsort(-base[held], kind="stable")]
+    layers, first = np.unique(layer[giving], return_index=True)
+    giver = np.full(n, -1)
+    giver[layers] = giving[first]
+    take = ~held & (giver[layer] >= 0)
+    source = giver[layer[take]]
+    base[take], on[take] = base[source], on[source]
     return base, on, held
 
 
