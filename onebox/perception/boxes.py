@@ -54,7 +54,6 @@ from dataclasses import dataclass, field, replace
 import cv2
 import numpy as np
 import numpy.typing as npt
-from scipy.sparse.csgraph import connected_components
 
 from onebox.geometry import Intrinsics
 from onebox.perception import kernels, register
@@ -849,14 +848,16 @@ def _bases(
     alike = (np.abs(tops.height_m[:, None] - tops.height_m[None, :]) < tolerance[:, 0, 0]) & (
         touching | touching.T
     )
-    _, layer = connected_components(alike, directed=False)
-    giving = np.flatnonzero(held)[np.argsort(-base[held], kind="stable")]
-    layers, first = np.unique(layer[giving], return_index=True)
-    giver = np.full(n, -1)
-    giver[layers] = giving[first]
-    take = ~held & (giver[layer] >= 0)
-    source = giver[layer[take]]
-    base[take], on[take] = base[source], on[source]
+    layer = alike | np.eye(n, dtype=bool)
+    while alike.any():  # ... along the layer: the tops reached through one another
+        grown = (layer.astype(np.int64) @ layer.astype(np.int64)) > 0
+        if (grown == layer).all():
+            break
+        layer = grown
+    given = np.where(layer & held[None, :], base[None, :], -np.inf)
+    source = np.argmax(given, axis=1)
+    take = ~held & np.isfinite(given[rows, source])
+    base[take], on[take] = base[source[take]], on[source[take]]
     return base, on, held
 
 
