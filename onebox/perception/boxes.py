@@ -783,7 +783,10 @@ def _bases(
     (a box beside lower ones, seen from the side they do not hide), and a level found where
     the faces end, past two sides or more, wins (a box on one a little wider, whose top shows
     past few probes; a box beside a lower one finds that one past a single side); where
-    the faces end on the face of a box sticking out under them, it stands there."""
+    the faces end on the face of a box sticking out under them, it stands there. Nothing
+    stands through a lower top whose rectangle holds its middle: read lower than that, it
+    stands on it. A top that finds only a lower neighbour beside it takes the level its layer
+    stands on (below)."""
     n = len(tops)
     lower = tops.height_m[None, :] < tops.height_m[:, None] - 0.01  # (k top, j lower)
     seen = round_.seen_top.reshape(n, -1)
@@ -839,6 +842,14 @@ def _bases(
     unmatched = ledge & (np.abs(base - face_bottom_m) > step)
     base = np.where(unmatched, face_bottom_m, base)
     on = np.where(unmatched, -1, on)
+    # Nothing stands through a top under it: a box read lower than a lower top whose
+    # rectangle holds its middle (its face running on down flush with that one's, or past it
+    # into the floor seen beyond) stands on that top, the highest such.
+    under = np.where(lower & holds, tops.height_m[None, :], -np.inf)
+    j = np.argmax(under, axis=1)
+    through = base < under[rows, j] - tolerance[:, 0, 0, 0]
+    base = np.where(through, tops.height_m[j], base)
+    on = np.where(through, j, on)
     held = (on < 0) | holds[rows, np.maximum(on, 0)]
     # Cartons packed side by side at one height stand on one level: a top that finds only a
     # lower neighbour beside it takes the level a top of its layer (its height, touching,
