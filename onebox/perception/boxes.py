@@ -856,9 +856,11 @@ def _bases(
     # along the layer) stands on, seen under it (the support, or a top reaching under it):
     # the highest such, where a flush face runs on down past a pallet's edge.
     touching = counts[:, 1:] > 0
-    alike = (np.abs(tops.height_m[:, None] - tops.height_m[None, :]) < tolerance[:, 0, 0]) & (
-        touching | touching.T
-    )
+    noise = tolerance[:, 0, 0, 0]
+    alike = (
+        np.abs(tops.height_m[:, None] - tops.height_m[None, :])
+        < np.maximum(noise[:, None], noise[None, :])
+    ) & (touching | touching.T)
     layer = alike | np.eye(n, dtype=bool)
     while alike.any():  # ... along the layer: the tops reached through one another
         grown = (layer.astype(np.int64) @ layer.astype(np.int64)) > 0
