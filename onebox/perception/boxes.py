@@ -674,7 +674,7 @@ def _looked_at(
     nearer at the top's height; and for each, how much nearer a point reads along the line of
     sight to the face's middle per metre it lies out from the face's plane (one over the
     cosine between the face's outward normal and that line, scaled to depth: large where the
-    face is seen nearly edge-on; infinite for a side facing away)."""
+    face is seen nearly edge-on; 0 for a side facing away)."""
     axis = tops.axis_ab
     perp = np.stack([-axis[:, 1], axis[:, 0]], axis=1)
     outward = np.stack([axis, -axis, perp, -perp], axis=1)
