@@ -155,9 +155,11 @@ def _every_carton_right(judged: Judged, noise: str, found: int) -> None:
     assert max(judged.centre_mm) <= (5.0 if noise == "none" else 10.0), judged.notes
 
 
-@pytest.mark.parametrize("seed", marked([1, 3, 4, 9, 15, 27, 47], XFAIL_SCENE))
+@pytest.mark.parametrize("seed", marked([1, 3, 4, 6, 9, 13, 15, 27, 47], XFAIL_SCENE))
 def test_random_scene_every_box_right(seed):
-    """Every box found, none false, each height (partly hidden ones too) within 2 mm."""
+    """Every box found, none false, each height (partly hidden ones too) within 2 mm. (Seeds 6
+    and 13: a box on a wider box, whose rectangle holds its middle, stands on it; it was read
+    from a level below it, the floor on seed 13.)"""
     judged = _judged(random_scene(seed, boxes=8, objects=3, width=640, height=480))
     assert judged.missed == 0 and judged.false == 0, judged.notes
     assert judged.found >= 3
