@@ -81,6 +81,8 @@ PROBE_REACH_M = 0.012
 """...this far past it (and at least two pixels): past a smeared edge, within a gap."""
 FACE_LEVELS = 12
 """Heights a top's faces are looked at, from its edge down to the support."""
+FINE_LEVELS = 8
+"""Where a face is seen to end, it is looked at again this many times finer."""
 RECESS_M = 0.1
 """A face seen ending over a surface less than this behind it overhangs a box..."""
 STICKING_OUT_M = 0.1
@@ -730,7 +732,9 @@ def _face_bottom(
     """How far down each top's faces are seen going on from its edge without a break (on the
     side that shows them lowest): a box's side ends where it stands. NaN where no face is
     seen. Also whether the face is seen to end there: past it nothing is where the face would
-    go on, or the face of a box under it sticks out (not a top in front, which only hides it)."""
+    go on, or the face of a box under it sticks out (not a top in front, which only hides it),
+    or a face read steady down its levels steps out; where it ends is then looked for again
+    between its last level and the next, finer."""
     n = len(tops)
     share = 1.0 - np.linspace(0.05, 1.0, FACE_LEVELS)
     heights = share[None, :] * tops.height_m[:, None]  # top down to the support
@@ -764,16 +768,55 @@ def _face_bottom(
     # quiet, a face seen nearly edge-on reads the half pixel its side may lie off as that
     # much nearer, over the cosine between its normal and the line of sight: a face under it
     # sticks out only past that. (Through noise the tolerance for it is asked already.)
-    edge_on = np.where(quiet, 0.5 * tops.pixel_m * slant[np.arange(n), side], 0.0)
+    half_pixel = 0.5 * tops.pixel_m * slant[np.arange(n), side]
+    edge_on = np.where(quiet, half_pixel, 0.0)
+    # A face read steady down its levels (a box's side, not a face placed a little askew)
+    # steps out where a box a little wider stands under it, whose top is too narrow to be
+    # seen: nearer than the face reads above, past the noise and the half pixel that a probe
+    # and the face's reading each may land off.
+    on_side = on_face[index[:2]]  # (n, levels, probes)
+    with np.errstate(invalid="ignore"):
+        total = np.where(on_side, seen[index[:2]] - z_expected[index[:2]], 0.0).sum(axis=2)
+    by_level = total / np.maximum(on_side.sum(axis=2), 1)  # (n, levels)
+    face_levels = np.arange(FACE_LEVELS)[None, :] < deepest[:, None]
+    high = np.max(np.where(face_levels, by_level, -np.inf), axis=1)
+    low = np.min(np.where(face_levels, by_level, np.inf), axis=1)
+    allowed = 4.0 * tops.sigma_m + 2.0 * half_pixel
+    steady = (deepest >= 2) & (high - low < allowed)
+    face = np.where(face_levels, by_level, 0.0).sum(axis=1) / np.maximum(deepest, 1)
     with np.errstate(invalid="ignore"):
         sticking_out = (
-            (gap < -(tolerance[:, 0, 0] + edge_on[:, None]))
+            (
+                (gap < -(tolerance[:, 0, 0] + edge_on[:, None]))
+                | (steady[:, None] & (gap - face[:, None] < -allowed[:, None]))
+            )
             & inside[index]
             & ~on_top
             & (gap > -STICKING_OUT_M)
         )
     ends = recessed | sticking_out
     ledge = (ends.mean(axis=1) >= 0.5) & (deepest > 0) & (deepest < FACE_LEVELS)
+    if ledge.any():
+        # Where between its last level and the next the face ends, to a part of a level (the
+        # box stands there): the last of finer levels still read as the face, nearer what it
+        # reads above than what is seen past its end.
+        past = np.where(ends, gap, 0.0).sum(axis=1) / np.maximum(ends.sum(axis=1), 1)
+        spacing = share[0] - share[1]
+        last_share = share[np.clip(deepest - 1, 0, FACE_LEVELS - 1)]
+        fine = last_share[:, None] - spacing * np.arange(1, FINE_LEVELS)[None, :] / FINE_LEVELS
+        z_fine, seen_fine, inside_fine, _ = _on_sides(
+            tops, fine * tops.height_m[:, None], depth_m, lens, support
+        )
+        reading = (seen_fine - z_fine)[np.arange(n), side]  # (n, fine levels, probes)
+        valid = inside_fine[np.arange(n), side] & np.isfinite(reading)
+        mean = np.where(valid, reading, 0.0).sum(axis=2) / np.maximum(valid.sum(axis=2), 1)
+        on_fine = (np.abs(reading) < tolerance[:, 0]) & valid
+        still = (np.abs(mean - face[:, None]) < np.abs(mean - past[:, None])) & (
+            on_fine.sum(axis=2) >= 0.5 * np.maximum(valid.sum(axis=2), 1)
+        )
+        further = np.cumprod(still, axis=1).sum(axis=1)
+        refined = (last_share - spacing * further / FINE_LEVELS) * tops.height_m
+        bottom = np.where(ledge, refined, bottom)
     looked_any = looked.any(axis=1)
     return np.where(looked_any, bottom, np.nan), ledge & looked_any
 
@@ -815,7 +858,12 @@ def _bases(
     holds = (along <= 0.5 * tops.length_m[None, :]) & (across <= 0.5 * tops.width_m[None, :])
     reach = 0.5 * np.hypot(tops.length_m, tops.width_m) + PROBE_REACH_M
     near = np.hypot(d[..., 0], d[..., 1]) < reach[:, None] + reach[None, :]
-    step = tops.height_m / FACE_LEVELS + np.maximum(4.0 * tops.sigma_m, WALL_TOLERANCE_M)
+    # How far above where the faces end a level may be that they end on (a level, and the
+    # face's tolerance: a top in front may hide their last part), and how far below (where
+    # the end was looked for again finer, a finer level and the tolerance).
+    wall = np.maximum(4.0 * tops.sigma_m, WALL_TOLERANCE_M)
+    step = tops.height_m / FACE_LEVELS + wall
+    step_below = np.where(ledge, tops.height_m / (FACE_LEVELS * FINE_LEVELS) + wall, step)
     above_faces = tops.height_m[None, :] > (face_bottom_m + step)[:, None]  # NaN: never
     candidate = lower & ((counts[:, 1:] > 0) | holds | near) & ~above_faces
     candidate[np.arange(n), np.arange(n)] = False
@@ -838,7 +886,8 @@ def _bases(
     # The level its faces are seen to end on, found past two sides or more, is what it stands
     # on (a box beside a lower one finds that one past a single side).
     sides = found.any(axis=3).sum(axis=2)
-    at_face = (np.abs(levels - face_bottom_m[:, None]) < step[:, None]) & (sides >= 2)
+    off_faces = levels - face_bottom_m[:, None]
+    at_face = (off_faces < step[:, None]) & (off_faces > -step_below[:, None]) & (sides >= 2)
     score += 1000.0 * at_face
     score += 1e-3 * np.nan_to_num(levels, nan=0.0)  # ties: the higher
     best = np.argmax(score, axis=1)
@@ -856,7 +905,7 @@ def _bases(
     on = np.where(best < width, ranked[rows, np.minimum(best, width - 1)], -1)
     # A face seen to end: the box stands there (on a box whose top it hides, or that is too
     # small to be a top), unless a level was found there.
-    unmatched = ledge & (np.abs(base - face_bottom_m) > step)
+    unmatched = ledge & ((base - face_bottom_m > step) | (base - face_bottom_m < -step_below))
     base = np.where(unmatched, face_bottom_m, base)
     on = np.where(unmatched, -1, on)
     # Nothing stands through a top under it: a box read lower than a lower top whose
