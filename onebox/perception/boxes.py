@@ -733,8 +733,8 @@ def _face_bottom(
     side that shows them lowest): a box's side ends where it stands. NaN where no face is
     seen. Also whether the face is seen to end there: past it nothing is where the face would
     go on, or the face of a box under it sticks out (not a top in front, which only hides it),
-    or a face read steady down its levels steps out; where it ends is then looked for again
-    between its last level and the next, finer."""
+    or a face read steady down its levels steps out (all against what the face reads above);
+    where it ends is then looked for again, finer, from its last level down to there."""
     n = len(tops)
     share = 1.0 - np.linspace(0.05, 1.0, FACE_LEVELS)
     heights = share[None, :] * tops.height_m[:, None]  # top down to the support
@@ -752,17 +752,10 @@ def _face_bottom(
     )
     # What is seen just under the face's end on that side: something nearer that is no top's
     # (a neighbour's top in front only hides the face; a box's face sticking out carries it).
-    below = np.clip(deepest, 0, FACE_LEVELS - 1)
-    index = (np.arange(n), side, below)
     rows, cols = tops.labels.shape
-    vc, uc = vi[index] - origin[0], ui[index] - origin[1]
-    in_crop = (vc >= 0) & (vc < rows) & (uc >= 0) & (uc < cols)
     near_top = cv2.dilate((tops.labels > 0).astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
-    on_top = in_crop & near_top[np.clip(vc, 0, rows - 1), np.clip(uc, 0, cols - 1)]
-    gap = seen[index] - z_expected[index]
-    with np.errstate(invalid="ignore"):
-        recessed = (gap > tolerance[:, 0, 0]) & (gap < RECESS_M) & inside[index]
-    # Past the face's end: a box's face a little behind it (it overhangs that box) or
+    # Past the face's end, against what the face reads above it (its plane may lie a little
+    # off the rectangle's side): a box's face a little behind it (it overhangs that box) or
     # sticking out (it stands on a wider one); a top in front only hides where it goes on,
     # and past a wide gap nothing is under it (a table's top on legs). Where the noise is
     # quiet, a face seen nearly edge-on reads the half pixel its side may lie off as that
@@ -774,9 +767,9 @@ def _face_bottom(
     # steps out where a box a little wider stands under it, whose top is too narrow to be
     # seen: nearer than the face reads above, past the noise and the half pixel that a probe
     # and the face's reading each may land off.
-    on_side = on_face[index[:2]]  # (n, levels, probes)
+    on_side = on_face[np.arange(n), side]  # (n, levels, probes)
     with np.errstate(invalid="ignore"):
-        total = np.where(on_side, seen[index[:2]] - z_expected[index[:2]], 0.0).sum(axis=2)
+        total = np.where(on_side, (seen - z_expected)[np.arange(n), side], 0.0).sum(axis=2)
     by_level = total / np.maximum(on_side.sum(axis=2), 1)  # (n, levels)
     face_levels = np.arange(FACE_LEVELS)[None, :] < deepest[:, None]
     high = np.max(np.where(face_levels, by_level, -np.inf), axis=1)
@@ -784,26 +777,51 @@ def _face_bottom(
     allowed = 4.0 * tops.sigma_m + 2.0 * half_pixel
     steady = (deepest >= 2) & (high - low < allowed)
     face = np.where(face_levels, by_level, 0.0).sum(axis=1) / np.maximum(deepest, 1)
-    with np.errstate(invalid="ignore"):
-        sticking_out = (
-            (
-                (gap < -(tolerance[:, 0, 0] + edge_on[:, None]))
-                | (steady[:, None] & (gap - face[:, None] < -allowed[:, None]))
+
+    def ends_at(level: npt.NDArray[np.intp]) -> tuple[BoolArray, Float64Array]:
+        """Per probe at ``level`` on the side: whether the face is seen to end there, and
+        what is read there off the face's plane."""
+        index = (np.arange(n), side, level)
+        vc, uc = vi[index] - origin[0], ui[index] - origin[1]
+        in_crop = (vc >= 0) & (vc < rows) & (uc >= 0) & (uc < cols)
+        on_top = in_crop & near_top[np.clip(vc, 0, rows - 1), np.clip(uc, 0, cols - 1)]
+        gap = seen[index] - z_expected[index]
+        off = gap - face[:, None]  # off what the face reads
+        with np.errstate(invalid="ignore"):
+            recessed = (off > tolerance[:, 0, 0]) & (gap < RECESS_M) & inside[index]
+            sticking_out = (
+                (
+                    (off < -(tolerance[:, 0, 0] + edge_on[:, None]))
+                    | (steady[:, None] & (off < -allowed[:, None]))
+                )
+                & inside[index]
+                & ~on_top
+                & (gap > -STICKING_OUT_M)
             )
-            & inside[index]
-            & ~on_top
-            & (gap > -STICKING_OUT_M)
-        )
-    ends = recessed | sticking_out
-    ledge = (ends.mean(axis=1) >= 0.5) & (deepest > 0) & (deepest < FACE_LEVELS)
+        result: BoolArray = recessed | sticking_out
+        return result, gap
+
+    # Just under its last level, or where the face reads steady the level after (probes there
+    # may straddle the end, and read neither the face nor what is past it).
+    below = np.clip(deepest, 0, FACE_LEVELS - 1)
+    ends, gap = ends_at(below)
+    later, later_gap = ends_at(np.clip(deepest + 1, 0, FACE_LEVELS - 1))
+    first = ends.mean(axis=1) >= 0.5
+    second = ~first & steady & (later.mean(axis=1) >= 0.5) & (deepest + 1 < FACE_LEVELS)
+    ledge = (first | second) & (deepest > 0) & (deepest < FACE_LEVELS)
     if ledge.any():
-        # Where between its last level and the next the face ends, to a part of a level (the
-        # box stands there): the last of finer levels still read as the face, nearer what it
-        # reads above than what is seen past its end.
+        # Where between its last level and where it is seen to end the face ends, to a part
+        # of a level (the box stands there): the last of finer levels still read as the face,
+        # nearer what it reads above than what is seen past its end.
+        ends, gap = (
+            np.where(second[:, None], later, ends),
+            np.where(second[:, None], later_gap, gap),
+        )
         past = np.where(ends, gap, 0.0).sum(axis=1) / np.maximum(ends.sum(axis=1), 1)
         spacing = share[0] - share[1]
         last_share = share[np.clip(deepest - 1, 0, FACE_LEVELS - 1)]
-        fine = last_share[:, None] - spacing * np.arange(1, FINE_LEVELS)[None, :] / FINE_LEVELS
+        finer = np.arange(1, 2 * FINE_LEVELS)[None, :] / FINE_LEVELS
+        fine = last_share[:, None] - spacing * finer
         z_fine, seen_fine, inside_fine, _ = _on_sides(
             tops, fine * tops.height_m[:, None], depth_m, lens, support
         )
@@ -814,6 +832,7 @@ def _face_bottom(
         still = (np.abs(mean - face[:, None]) < np.abs(mean - past[:, None])) & (
             on_fine.sum(axis=2) >= 0.5 * np.maximum(valid.sum(axis=2), 1)
         )
+        still &= finer < np.where(second, 2, 1)[:, None]
         further = np.cumprod(still, axis=1).sum(axis=1)
         refined = (last_share - spacing * further / FINE_LEVELS) * tops.height_m
         bottom = np.where(ledge, refined, bottom)
@@ -904,10 +923,19 @@ def _bases(
     best = np.where(under_alike.any(axis=1), np.argmax(under_alike, axis=1), best)
     on = np.where(best < width, ranked[rows, np.minimum(best, width - 1)], -1)
     # A face seen to end: the box stands there (on a box whose top it hides, or that is too
-    # small to be a top), unless a level was found there.
+    # small to be a top), unless a level was found there; or on the level there of the support
+    # or a top reaching under it, the highest (a top's level is read more surely than where a
+    # face ends).
     unmatched = ledge & ((base - face_bottom_m > step) | (base - face_bottom_m < -step_below))
-    base = np.where(unmatched, face_bottom_m, base)
-    on = np.where(unmatched, -1, on)
+    reaching = np.concatenate(
+        [np.take_along_axis(holds, ranked, axis=1), np.ones((n, 1), dtype=bool)], axis=1
+    )
+    there = (np.abs(off_faces) < step_below[:, None]) & reaching
+    nearest = np.argmax(np.where(there, levels, -np.inf), axis=1)
+    level_there = there[rows, nearest]
+    base = np.where(unmatched, np.where(level_there, levels[rows, nearest], face_bottom_m), base)
+    on_there = np.where(nearest < width, ranked[rows, np.minimum(nearest, width - 1)], -1)
+    on = np.where(unmatched, np.where(level_there, on_there, -1), on)
     # Nothing stands through a top under it: a box read lower than a lower top whose
     # rectangle holds its middle (its face running on down flush with that one's, or past it
     # into the floor seen beyond) stands on that top, the highest such.
@@ -918,9 +946,10 @@ def _bases(
     on = np.where(through, j, on)
     held = (on < 0) | holds[rows, np.maximum(on, 0)]
     # Cartons packed side by side at one height stand on one level: a top that finds only a
-    # lower neighbour beside it takes the level a top of its layer (its height, touching,
-    # along the layer) stands on, seen under it (the support, or a top reaching under it):
-    # the highest such, where a flush face runs on down past a pallet's edge.
+    # lower neighbour beside it (its faces not seen to end on it) takes the level a top of its
+    # layer (its height, touching, along the layer) stands on, seen under it (the support, or
+    # a top reaching under it): the highest such, where a flush face runs on down past a
+    # pallet's edge.
     touching = counts[:, 1:] > 0
     noise = tolerance[:, 0, 0, 0]
     alike = (
@@ -935,7 +964,7 @@ def _bases(
         layer = grown
     given = np.where(layer & held[None, :], base[None, :], -np.inf)
     source = np.argmax(given, axis=1)
-    take = ~held & np.isfinite(given[rows, source])
+    take = ~held & ~(unmatched & ~through) & np.isfinite(given[rows, source])
     base[take], on[take] = base[source[take]], on[source[take]]
     return base, on, held
 
