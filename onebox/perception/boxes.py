@@ -780,7 +780,7 @@ def _face_bottom(
 
     def ends_at(level: npt.NDArray[np.intp]) -> tuple[BoolArray, Float64Array]:
         """Per probe at ``level`` on the side: whether the face is seen to end there, and
-        what is read there off the face's plane."""
+        how far behind the side's plane it reads (negative: nearer)."""
         index = (np.arange(n), side, level)
         vc, uc = vi[index] - origin[0], ui[index] - origin[1]
         in_crop = (vc >= 0) & (vc < rows) & (uc >= 0) & (uc < cols)
@@ -812,7 +812,7 @@ def _face_bottom(
     if ledge.any():
         # Where between its last level and where it is seen to end the face ends, to a part
         # of a level (the box stands there): the last of finer levels still read as the face,
-        # nearer what it reads above than what is seen past its end.
+        # within its tolerance and nearer what it reads above than what is seen past its end.
         ends, gap = (
             np.where(second[:, None], later, ends),
             np.where(second[:, None], later_gap, gap),
@@ -862,10 +862,11 @@ def _bases(
     (a box beside lower ones, seen from the side they do not hide), and a level found where
     the faces end, past two sides or more, wins (a box on one a little wider, whose top shows
     past few probes; a box beside a lower one finds that one past a single side); where
-    the faces end on the face of a box sticking out under them, it stands there. Nothing
-    stands through a lower top whose rectangle holds its middle: read lower than that, it
-    stands on it. A top that finds only a lower neighbour beside it takes the level its layer
-    stands on (below)."""
+    the faces end on the face of a box sticking out under them, it stands there (on the level
+    of the support or of a top reaching under it, if one is found there). Nothing stands
+    through a lower top whose rectangle holds its middle: read lower than that, it stands on
+    it. A top that finds only a lower neighbour beside it takes the level its layer stands on
+    (below)."""
     n = len(tops)
     lower = tops.height_m[None, :] < tops.height_m[:, None] - 0.01  # (k top, j lower)
     seen = round_.seen_top.reshape(n, -1)
