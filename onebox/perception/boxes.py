@@ -761,15 +761,16 @@ def _face_bottom(
     # quiet, a face seen nearly edge-on reads the half pixel its side may lie off as that
     # much nearer, over the cosine between its normal and the line of sight: a face under it
     # sticks out only past that. (Through noise the tolerance for it is asked already.)
-    half_pixel = 0.5 * tops.pixel_m * slant[np.arange(n), side]
+    per_side = (np.arange(n), side)
+    half_pixel = 0.5 * tops.pixel_m * slant[per_side]
     edge_on = np.where(quiet, half_pixel, 0.0)
     # A face read steady down its levels (a box's side, not a face placed a little askew)
     # steps out where a box a little wider stands under it, whose top is too narrow to be
     # seen: nearer than the face reads above, past the noise and the half pixel that a probe
     # and the face's reading each may land off.
-    on_side = on_face[np.arange(n), side]  # (n, levels, probes)
+    on_side = on_face[per_side]  # (n, levels, probes)
     with np.errstate(invalid="ignore"):
-        total = np.where(on_side, (seen - z_expected)[np.arange(n), side], 0.0).sum(axis=2)
+        total = np.where(on_side, seen[per_side] - z_expected[per_side], 0.0).sum(axis=2)
     by_level = total / np.maximum(on_side.sum(axis=2), 1)  # (n, levels)
     face_levels = np.arange(FACE_LEVELS)[None, :] < deepest[:, None]
     high = np.max(np.where(face_levels, by_level, -np.inf), axis=1)
@@ -825,8 +826,8 @@ def _face_bottom(
         z_fine, seen_fine, inside_fine, _ = _on_sides(
             tops, fine * tops.height_m[:, None], depth_m, lens, support
         )
-        reading = (seen_fine - z_fine)[np.arange(n), side]  # (n, fine levels, probes)
-        valid = inside_fine[np.arange(n), side] & np.isfinite(reading)
+        reading = seen_fine[per_side] - z_fine[per_side]  # (n, fine levels, probes)
+        valid = inside_fine[per_side] & np.isfinite(reading)
         mean = np.where(valid, reading, 0.0).sum(axis=2) / np.maximum(valid.sum(axis=2), 1)
         on_fine = (np.abs(reading) < tolerance[:, 0]) & valid
         still = (np.abs(mean - face[:, None]) < np.abs(mean - past[:, None])) & (
@@ -915,28 +916,35 @@ def _bases(
     base = np.nan_to_num(levels[rows, best], nan=0.0)
     # Tops at one level within the noise are found on the same probes: of those, it stands on
     # one that reaches under it (not a neighbour of that height beside it).
+    holds_ranked = np.take_along_axis(holds, ranked, axis=1)
     under_alike = (
         (np.abs(levels[:, :width] - levels[rows, best, None]) < tolerance[:, 0, 0])
         & (score[:, :width] >= 1000.0 * at_face[rows, best, None])
-        & np.take_along_axis(holds, ranked, axis=1)
+        & holds_ranked
         & (best < width)[:, None]
     )
     best = np.where(under_alike.any(axis=1), np.argmax(under_alike, axis=1), best)
-    on = np.where(best < width, ranked[rows, np.minimum(best, width - 1)], -1)
+
+    def top_of(column: npt.NDArray[np.intp]) -> npt.NDArray[np.intp]:
+        """The top at each row's ``column`` of ``levels`` (-1: the support)."""
+        top: npt.NDArray[np.intp] = np.where(
+            column < width, ranked[rows, np.minimum(column, width - 1)], -1
+        )
+        return top
+
+    on = top_of(best)
     # A face seen to end: the box stands there (on a box whose top it hides, or that is too
     # small to be a top), unless a level was found there; or on the level there of the support
     # or a top reaching under it, the highest (a top's level is read more surely than where a
     # face ends).
-    unmatched = ledge & ((base - face_bottom_m > step) | (base - face_bottom_m < -step_below))
-    reaching = np.concatenate(
-        [np.take_along_axis(holds, ranked, axis=1), np.ones((n, 1), dtype=bool)], axis=1
-    )
+    off_base = base - face_bottom_m
+    unmatched = ledge & ((off_base > step) | (off_base < -step_below))
+    reaching = np.concatenate([holds_ranked, np.ones((n, 1), dtype=bool)], axis=1)
     there = (np.abs(off_faces) < step_below[:, None]) & reaching
     nearest = np.argmax(np.where(there, levels, -np.inf), axis=1)
     level_there = there[rows, nearest]
     base = np.where(unmatched, np.where(level_there, levels[rows, nearest], face_bottom_m), base)
-    on_there = np.where(nearest < width, ranked[rows, np.minimum(nearest, width - 1)], -1)
-    on = np.where(unmatched, np.where(level_there, on_there, -1), on)
+    on = np.where(unmatched, np.where(level_there, top_of(nearest), -1), on)
     # Nothing stands through a top under it: a box read lower than a lower top whose
     # rectangle holds its middle (its face running on down flush with that one's, or past it
     # into the floor seen beyond) stands on that top, the highest such.
