@@ -75,7 +75,6 @@ XFAIL_ONE_SHADE = {
 }
 
 XFAIL_TAPED = {
-    (8, "none"): "box 8 0.304 x 0.219 m for 0.300 x 0.200",
     (30, "none"): f"{LOWER}: box 9 0.033 m for 0.183, from the 0.150 m tops beside it",
     (7, "d435"): f"{SHADE}: a pair one box 0.491 x 0.244 m (box 1 missed, a centre 124 mm off); "
     f"{LOWER}: box 3 0.018 m for 0.170",

@@ -195,7 +195,11 @@ def standing_regions(surface: Surface, min_height_m: float, max_height_m: float 
     if surface.quiet.any():
         # Where the depth is quiet a pixel-wide spur is still a stray, but a top two or three
         # pixels wide (a narrow box seen from far, slanting across the rows) is no streak.
-        thin = cv2.morphologyEx(core, cv2.MORPH_OPEN, np.ones((2, 2), np.uint8))
+        # (An even square has no middle: erode from the pixel down and right, dilate back up
+        # and left, so the opening keeps every pixel where it is. OpenCV's own opening with
+        # a 2 x 2 square shifts the result a pixel down and right, across a step's pixels.)
+        square = np.ones((2, 2), np.uint8)
+        thin = cv2.dilate(cv2.erode(core, square, anchor=(0, 0)), square, anchor=(1, 1))
         opened |= thin & surface.quiet.view(np.uint8)
     _, found = cv2.connectedComponents(opened, connectivity=4, ltype=cv2.CV_32S)
     labels: IntArray = np.asarray(found, dtype=np.int32)
