@@ -1706,16 +1706,18 @@ def grid_sample(
 
 @numba.njit(cache=True, nogil=True)
 def depth_steps(depth: Float32Array, every: int) -> Float64Array:
-    """On every ``every``-th row, each non-zero difference between horizontal neighbours
-    under 2 % of the depth, over the depth squared (:func:`onebox.perception.support.
-    depth_quantum`), in the picture's order."""
+    """On every ``every``-th row, each non-zero second difference along the row (a pixel
+    against the mean of its neighbours either side, twice) under 2 % of the depth, over the
+    depth squared (:func:`onebox.perception.support.depth_quantum`), in the picture's order.
+    A surface's own slope is no step: on a plane seen at a slant the first differences are
+    the slope, the second ones nothing but the steps the depth is reported in."""
     rows, cols = depth.shape
     result = np.empty((rows // every + 1) * cols)
     count = 0
     for r in range(0, rows, every):
-        for c in range(cols - 1):
-            z = np.float64(depth[r, c + 1])
-            diff = abs(z - np.float64(depth[r, c]))
+        for c in range(1, cols - 1):
+            z = np.float64(depth[r, c])
+            diff = abs(np.float64(depth[r, c + 1]) - 2.0 * z + np.float64(depth[r, c - 1]))
             if diff > 0 and diff < 0.02 * z:
                 result[count] = diff / (z * z)
                 count += 1

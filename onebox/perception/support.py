@@ -137,8 +137,9 @@ def _initial_threshold(
 def depth_quantum(depth_m: Float32Array) -> float:
     """The step in which the camera reports depth, over distance squared (1/m): a stereo or
     structured-light camera reports whole (or eighth) disparities, so its depth comes in steps
-    that grow as z^2. Measured as a low percentile of the non-zero differences between
-    horizontal neighbours on a grid of rows (0 for a renderer's continuous depth)."""
+    that grow as z^2. Measured as a low percentile of the non-zero second differences along
+    a grid of rows (:func:`kernels.depth_steps`: a surface seen at a slant has first
+    differences of its own; 0 for a renderer's continuous depth)."""
     steps = kernels.depth_steps(
         np.ascontiguousarray(depth_m, dtype=np.float32), max(1, depth_m.shape[0] // 48)
     )
