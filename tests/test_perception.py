@@ -19,8 +19,8 @@ from onebox.perception import kernels, register
 from onebox.perception.boxes import FinderSettings, find_boxes
 from onebox.perception.stream import BoxFinder
 from onebox.perception.support import depth_quantum, fit_support
-from onebox.perception.surface import read_surface
-from onebox.perception.tops import find_tops
+from onebox.perception.surface import Surface, read_surface
+from onebox.perception.tops import find_tops, standing_regions
 from onebox.testing import synthetic
 from onebox.testing.capture import load_capture
 from onebox.testing.judged import yaw_error
@@ -779,6 +779,27 @@ def test_a_smooth_depth_seen_at_a_slant_has_no_step_and_hides_no_small_step(turn
 
 
 # --- the pipeline's mechanisms, one by one -----------------------------------------------------
+def test_a_step_a_pixel_wide_parts_two_tops_where_the_depth_is_quiet():
+    """Two tops 6 mm apart in height, quiet depth, the step between them a staircase of
+    pixels slanting across the rows (two along for one down): two regions. Keeping thin tops
+    where the depth is quiet opens the cores with a 2 x 2 square, which must keep every pixel
+    where it is (shifted a pixel, the cores cross the staircase and the tops are one)."""
+    rows, cols = np.mgrid[0:60, 0:80]
+    line = cols + 2 * rows - 100
+    step = (line >= -2) & (line < 0)
+    surface = Surface(
+        height_m=np.where(line < 0, 0.167, 0.161).astype(np.float32),
+        sigma_m=np.full(line.shape, 0.0002, np.float32),
+        up=~step,
+        step=step,
+        slope=np.ones(line.shape, np.float32),
+        reach_px=2,
+        quiet=np.ones(line.shape, bool),
+    )
+    labels = standing_regions(surface, 0.01, None)
+    assert len(np.unique(labels[labels > 0])) == 2
+
+
 def test_a_tops_surface_faces_up_its_sides_do_not_and_its_outline_steps():
     """Every pixel's height above the support; a box's top faces up (farther from its outline
     than twice the normals' reach), its side faces do not; the depth steps all round it and
