@@ -719,6 +719,14 @@ def _hollow(
     return result
 
 
+def _mean_where(values: Float64Array, where: BoolArray, axis: int) -> Float64Array:
+    """The mean of ``values`` where ``where`` along ``axis`` (0 where none)."""
+    mean: Float64Array = np.where(where, values, 0.0).sum(axis=axis) / np.maximum(
+        where.sum(axis=axis), 1
+    )
+    return mean
+
+
 def _face_bottom(
     tops: Tops,
     looked: BoolArray,
@@ -770,14 +778,13 @@ def _face_bottom(
     # and the face's reading each may land off.
     on_side = on_face[per_side]  # (n, levels, probes)
     with np.errstate(invalid="ignore"):
-        total = np.where(on_side, seen[per_side] - z_expected[per_side], 0.0).sum(axis=2)
-    by_level = total / np.maximum(on_side.sum(axis=2), 1)  # (n, levels)
+        by_level = _mean_where(seen[per_side] - z_expected[per_side], on_side, 2)  # (n, levels)
     face_levels = np.arange(FACE_LEVELS)[None, :] < deepest[:, None]
     high = np.max(np.where(face_levels, by_level, -np.inf), axis=1)
     low = np.min(np.where(face_levels, by_level, np.inf), axis=1)
     allowed = 4.0 * tops.sigma_m + 2.0 * half_pixel
     steady = (deepest >= 2) & (high - low < allowed)
-    face = np.where(face_levels, by_level, 0.0).sum(axis=1) / np.maximum(deepest, 1)
+    face = _mean_where(by_level, face_levels, 1)
 
     def ends_at(level: npt.NDArray[np.intp]) -> tuple[BoolArray, Float64Array]:
         """Per probe at ``level`` on the side: whether the face is seen to end there, and
@@ -818,7 +825,7 @@ def _face_bottom(
             np.where(second[:, None], later, ends),
             np.where(second[:, None], later_gap, gap),
         )
-        past = np.where(ends, gap, 0.0).sum(axis=1) / np.maximum(ends.sum(axis=1), 1)
+        past = _mean_where(gap, ends, 1)
         spacing = share[0] - share[1]
         last_share = share[np.clip(deepest - 1, 0, FACE_LEVELS - 1)]
         finer = np.arange(1, 2 * FINE_LEVELS)[None, :] / FINE_LEVELS
@@ -828,7 +835,7 @@ def _face_bottom(
         )
         reading = seen_fine[per_side] - z_fine[per_side]  # (n, fine levels, probes)
         valid = inside_fine[per_side] & np.isfinite(reading)
-        mean = np.where(valid, reading, 0.0).sum(axis=2) / np.maximum(valid.sum(axis=2), 1)
+        mean = _mean_where(reading, valid, 2)
         on_fine = (np.abs(reading) < tolerance[:, 0]) & valid
         still = (np.abs(mean - face[:, None]) < np.abs(mean - past[:, None])) & (
             on_fine.sum(axis=2) >= 0.5 * np.maximum(valid.sum(axis=2), 1)
